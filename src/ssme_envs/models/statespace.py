@@ -1,0 +1,314 @@
+"""Discrete state-space models in alpha-canonical form, with JSON read/write.
+
+The alpha-canonical form (Eldem and Duyar 1989; NASA TM-104422 eqs 5-8, with H = I) of an
+observable system with observability indices ``mu = (mu_1, ..., mu_p)`` is
+
+    x(k+1) = A x(k) + B u*(k),   y(k) = C x(k),
+    C = [0  I_p],   A = A_o + K C,   A_o nilpotent (zeros and ones),
+
+where output ``i`` owns a chain of ``mu_i`` states. State ``(i, d)`` holds the part of
+``y_i`` that will appear ``d`` samples from now; the chains are stored deepest block first,
+so that the last ``p`` states are the outputs themselves. ``A_o`` shifts ``(i, d)`` into
+``(i, d - 1)``. Row ``(i, d)`` of ``[K B]`` is the coefficient of ``[y; u*](k-1-d)`` in the
+one-step equation of ``y_i(k)`` (eq 11), and the uniqueness condition (eq 8) forces
+``K[(i, d), j] = 0`` whenever ``mu_i > mu_j`` and ``d < mu_i - mu_j``.
+
+``u*`` is the input after the piecewise-linear gain of eq 36: ``lambda_i u_i`` for
+``u_i >= 0`` and ``(2 - lambda_i) u_i`` for ``u_i < 0``.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+ENGINE_MODEL_SCHEMA = "ssme-envs/engine-model"
+ENGINE_MODEL_SCHEMA_VERSION = 1
+
+
+@dataclass(frozen=True)
+class AlphaStructure:
+    """Index bookkeeping of the alpha-canonical form for given observability indices.
+
+    Attributes
+    ----------
+    indices : tuple of int
+        Observability index of each output.
+    states : tuple of (output, depth)
+        The state ordering: deepest block first, the outputs last.
+    """
+
+    indices: tuple[int, ...]
+    states: tuple[tuple[int, int], ...]
+
+    @classmethod
+    def from_indices(cls, indices: Sequence[int]) -> AlphaStructure:
+        idx = tuple(int(v) for v in indices)
+        if not idx or any(v < 1 for v in idx):
+            raise ValueError(f"observability indices must be positive integers, got {list(indices)}")
+        states = tuple((i, d) for d in range(max(idx) - 1, -1, -1) for i in range(len(idx)) if idx[i] > d)
+        return cls(idx, states)
+
+    @property
+    def n_states(self) -> int:
+        return len(self.states)
+
+    @property
+    def n_outputs(self) -> int:
+        return len(self.indices)
+
+    def position(self, output: int, depth: int) -> int:
+        """Row of state ``(output, depth)``."""
+        return self.states.index((output, depth))
+
+    def shift_matrix(self) -> np.ndarray:
+        """The nilpotent structure matrix A_o."""
+        a_o = np.zeros((self.n_states, self.n_states))
+        for row, (i, d) in enumerate(self.states):
+            if d >= 1:
+                a_o[self.position(i, d - 1), row] = 1.0
+        return a_o
+
+    def output_matrix(self) -> np.ndarray:
+        """C = [0 I]."""
+        c = np.zeros((self.n_outputs, self.n_states))
+        c[:, self.n_states - self.n_outputs :] = np.eye(self.n_outputs)
+        return c
+
+    def free_output_lags(self, output: int) -> list[tuple[int, int]]:
+        """(output j, depth d) pairs whose K entry is free in the row chain of ``output`` (eq 8)."""
+        mu_i = self.indices[output]
+        return [
+            (j, d)
+            for d in range(mu_i)
+            for j, mu_j in enumerate(self.indices)
+            if not (mu_i > mu_j and d < mu_i - mu_j)
+        ]
+
+
+def asymmetric_gain(u: np.ndarray, lam: np.ndarray) -> np.ndarray:
+    """Piecewise-linear input gain of eq 36, applied along the last axis.
+
+    Parameters
+    ----------
+    u : array, shape (..., m)
+        Input deviations (normalized valve positions).
+    lam : array, shape (m,)
+        Gains for positive deviations; negative ones get ``2 - lam``.
+    """
+    u = np.asarray(u, dtype=float)
+    return u + (np.asarray(lam, dtype=float) - 1.0) * np.abs(u)
+
+
+def _matrix(value: Any, name: str, shape: tuple[int | None, int | None]) -> np.ndarray:
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name} must be a numeric matrix (list of rows): {exc}") from None
+    if arr.ndim != 2:
+        raise ValueError(f"{name} must be a matrix (list of rows), got {arr.ndim} dimension(s)")
+    for axis, want in enumerate(shape):
+        if want is not None and arr.shape[axis] != want:
+            raise ValueError(f"{name} has shape {arr.shape}, expected {shape[0] or 'n'} x {shape[1] or 'n'}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} contains NaN or inf")
+    return arr
+
+
+@dataclass
+class AlphaCanonicalModel:
+    """A discrete engine model ``x(k+1) = A x + B u*``, ``y = C x`` in alpha-canonical form.
+
+    Parameters
+    ----------
+    A, B, C : ndarray
+        State-space matrices, shapes (n, n), (n, m), (p, n).
+    dt : float
+        Sample time in seconds.
+    observability_indices : tuple of int
+        One per output; they sum to n.
+    lam : ndarray, shape (m,)
+        Asymmetric input gains of eq 36 (1.0 means symmetric).
+    input_names, output_names : tuple of str
+        Column names of the record the model describes.
+    fit : dict
+        Fit figures (SEE, NRMSE) and provenance; free-form, JSON-serializable.
+    """
+
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    dt: float
+    observability_indices: tuple[int, ...]
+    lam: np.ndarray
+    input_names: tuple[str, ...] = ("beta_opov", "beta_fpov")
+    output_names: tuple[str, ...] = ("pc", "mr")
+    fit: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self.A = _matrix(self.A, "A", (None, None))
+        n = self.A.shape[0]
+        if self.A.shape[1] != n:
+            raise ValueError(f"A must be square, got shape {self.A.shape}")
+        self.B = _matrix(self.B, "B", (n, None))
+        self.C = _matrix(self.C, "C", (None, n))
+        m, p = self.B.shape[1], self.C.shape[0]
+        if not (isinstance(self.dt, int | float) and np.isfinite(self.dt) and self.dt > 0):
+            raise ValueError(f"dt must be a positive number of seconds, got {self.dt!r}")
+        self.dt = float(self.dt)
+        structure = AlphaStructure.from_indices(self.observability_indices)
+        self.observability_indices = structure.indices
+        if structure.n_outputs != p or structure.n_states != n:
+            raise ValueError(
+                f"observability_indices {list(structure.indices)} need {structure.n_outputs} outputs "
+                f"and {structure.n_states} states, the matrices have {p} and {n}"
+            )
+        self.lam = np.asarray(self.lam, dtype=float).reshape(-1)
+        if self.lam.shape != (m,) or not np.all(np.isfinite(self.lam)):
+            raise ValueError(f"lambda must hold {m} finite gains, got {self.lam.tolist()}")
+        self.input_names = tuple(str(v) for v in self.input_names)
+        self.output_names = tuple(str(v) for v in self.output_names)
+        if len(self.input_names) != m or len(self.output_names) != p:
+            raise ValueError(
+                f"{len(self.input_names)} input names and {len(self.output_names)} output names "
+                f"for a model with {m} inputs and {p} outputs"
+            )
+
+    @property
+    def structure(self) -> AlphaStructure:
+        return AlphaStructure.from_indices(self.observability_indices)
+
+    @property
+    def K(self) -> np.ndarray:
+        """Output-injection (deadbeat observer) gain: the last p columns of A."""
+        return self.A[:, self.A.shape[0] - self.C.shape[0] :].copy()
+
+    @property
+    def n_inputs(self) -> int:
+        return self.B.shape[1]
+
+    @property
+    def n_outputs(self) -> int:
+        return self.C.shape[0]
+
+    def markov_parameters(self, count: int) -> np.ndarray:
+        """``C A^k B`` for k = 0..count-1, shape (count, p, m)."""
+        out = np.empty((count, self.n_outputs, self.n_inputs))
+        ak_b = self.B.copy()
+        for k in range(count):
+            out[k] = self.C @ ak_b
+            ak_b = self.A @ ak_b
+        return out
+
+    def spectral_radius(self) -> float:
+        return float(np.max(np.abs(np.linalg.eigvals(self.A))))
+
+    def dc_gain(self) -> np.ndarray:
+        """Steady-state gain from u* to y, shape (p, m)."""
+        n = self.A.shape[0]
+        return self.C @ np.linalg.solve(np.eye(n) - self.A, self.B)
+
+    def alpha_canonical_residual(self) -> float:
+        """Largest violation of eqs 5-8 (0 for a model exactly in alpha-canonical form)."""
+        s = self.structure
+        a_o = s.shift_matrix()
+        errs = [np.max(np.abs(self.C - s.output_matrix())), np.max(np.abs(self.A - a_o - self.K @ self.C))]
+        for i in range(s.n_outputs):
+            free = set(s.free_output_lags(i))
+            for d in range(s.indices[i]):
+                for j in range(s.n_outputs):
+                    if (j, d) not in free:
+                        errs.append(abs(self.K[s.position(i, d), j]))
+        return float(max(errs))
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "schema": ENGINE_MODEL_SCHEMA,
+            "schema_version": ENGINE_MODEL_SCHEMA_VERSION,
+            "dt": self.dt,
+            "A": self.A.tolist(),
+            "B": self.B.tolist(),
+            "C": self.C.tolist(),
+            "observability_indices": list(self.observability_indices),
+            "lambda": self.lam.tolist(),
+            "input_names": list(self.input_names),
+            "output_names": list(self.output_names),
+            "fit": self.fit,
+        }
+
+    @classmethod
+    def from_dict(cls, data: Any, source: str = "model") -> AlphaCanonicalModel:
+        """Build a model from its JSON dictionary, checking everything a user file can get wrong."""
+        if not isinstance(data, dict):
+            raise ValueError(f"{source}: expected a JSON object, got {type(data).__name__}")
+        schema = data.get("schema", ENGINE_MODEL_SCHEMA)
+        if schema != ENGINE_MODEL_SCHEMA:
+            raise ValueError(f"{source}: schema is {schema!r}, expected {ENGINE_MODEL_SCHEMA!r}")
+        version = data.get("schema_version", ENGINE_MODEL_SCHEMA_VERSION)
+        if version != ENGINE_MODEL_SCHEMA_VERSION:
+            raise ValueError(f"{source}: unsupported schema_version {version!r}")
+        missing = [k for k in ("dt", "A", "B", "C", "observability_indices", "lambda") if k not in data]
+        if missing:
+            raise ValueError(f"{source}: missing key(s) {', '.join(missing)}")
+        try:
+            m = len(data["B"][0])
+            p = len(data["C"])
+        except (TypeError, IndexError, KeyError):
+            raise ValueError(f"{source}: B and C must be non-empty lists of rows") from None
+        indices = data["observability_indices"]
+        if not isinstance(indices, list) or not all(isinstance(v, int) for v in indices):
+            raise ValueError(f"{source}: observability_indices must be a list of integers")
+        try:
+            return cls(
+                A=data["A"],
+                B=data["B"],
+                C=data["C"],
+                dt=data["dt"],
+                observability_indices=tuple(indices),
+                lam=data["lambda"],
+                input_names=tuple(data.get("input_names", [f"u{i}" for i in range(m)])),
+                output_names=tuple(data.get("output_names", [f"y{i}" for i in range(p)])),
+                fit=dict(data.get("fit", {})),
+            )
+        except ValueError as exc:
+            raise ValueError(f"{source}: {exc}") from None
+
+    def save(self, path: str | Path) -> None:
+        Path(path).write_text(dumps_compact(self.to_dict()) + "\n")
+
+    @classmethod
+    def load(cls, path: str | Path) -> AlphaCanonicalModel:
+        path = Path(path)
+        try:
+            data = json.loads(path.read_text())
+        except FileNotFoundError:
+            raise ValueError(f"{path}: no such file") from None
+        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+            raise ValueError(f"{path}: not valid JSON ({exc})") from None
+        return cls.from_dict(data, source=str(path))
+
+
+def dumps_compact(obj: Any) -> str:
+    """JSON with one matrix row per line: readable diffs, exact round trip of floats."""
+
+    def render(value: Any, indent: int) -> str:
+        pad = " " * indent
+        if isinstance(value, dict):
+            if not value:
+                return "{}"
+            items = [f"{pad} {json.dumps(k)}: {render(v, indent + 1)}" for k, v in value.items()]
+            return "{\n" + ",\n".join(items) + "\n" + pad + "}"
+        if isinstance(value, list) and value and all(isinstance(v, list) for v in value):
+            rows = [f"{pad} {json.dumps(v)}" for v in value]
+            return "[\n" + ",\n".join(rows) + "\n" + pad + "]"
+        if isinstance(value, list) and any(isinstance(v, dict) for v in value):
+            rows = [f"{pad} {render(v, indent + 1)}" for v in value]
+            return "[\n" + ",\n".join(rows) + "\n" + pad + "]"
+        return json.dumps(value)
+
+    return render(obj, 0)
