@@ -8,7 +8,6 @@ through CSV files (header row, a ``t`` column in seconds or an explicit ``dt``).
 
 from __future__ import annotations
 
-import csv
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -17,6 +16,7 @@ import numpy as np
 
 from ssme_envs.identification.alpha_canonical import Identification, identify
 from ssme_envs.identification.metrics import validate
+from ssme_envs.identification.records import read_columns, write_columns
 from ssme_envs.models.engine import ENGINE_DT, POWER_LEVELS, TruthConfig, published_model, simulate
 from ssme_envs.models.statespace import AlphaCanonicalModel
 from ssme_envs.signals import prbs, step_ramp_test_signal
@@ -50,75 +50,16 @@ def read_record(
     outputs: Sequence[str] = DEFAULT_OUTPUTS,
     dt: float | None = None,
 ) -> EngineRecord:
-    """Read a CSV record with a header row; columns are chosen by name.
-
-    The sample time comes from a ``t`` column (uniformly spaced, s) or from ``dt``; when both
-    are there they must agree.
-
-    Raises
-    ------
-    ValueError
-        For a missing file, unknown columns, ragged rows, non-numeric cells, NaN/inf, or an
-        irregular or missing time base.
-    """
-    path = Path(path)
-    try:
-        with path.open(newline="") as fh:
-            rows = list(csv.reader(fh))
-    except FileNotFoundError:
-        raise ValueError(f"{path}: no such file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ValueError(f"{path}: cannot read ({exc})") from None
-    rows = [r for r in rows if r and any(cell.strip() for cell in r)]
-    if len(rows) < 2:
-        raise ValueError(f"{path}: needs a header row and data rows")
-    header = [h.strip() for h in rows[0]]
-    wanted = [*inputs, *outputs]
-    if len(set(wanted)) != len(wanted):
-        raise ValueError(f"{path}: a column is named twice among inputs and outputs: {', '.join(wanted)}")
-    unknown = [c for c in wanted if c not in header]
-    if unknown:
-        raise ValueError(f"{path}: unknown column(s) {', '.join(unknown)}; the file has {', '.join(header)}")
-    data = np.empty((len(rows) - 1, len(header)))
-    for r, row in enumerate(rows[1:], start=2):
-        if len(row) != len(header):
-            raise ValueError(f"{path}: line {r} has {len(row)} fields, the header has {len(header)}")
-        for c, cell in enumerate(row):
-            try:
-                data[r - 2, c] = float(cell)
-            except ValueError:
-                raise ValueError(
-                    f"{path}: line {r}, column '{header[c]}': {cell!r} is not a number"
-                ) from None
-    col = {name: i for i, name in enumerate(header)}
-    if "t" in col:
-        t = data[:, col["t"]]
-        steps = np.diff(t)
-        if t.size < 2 or not np.all(np.isfinite(t)) or np.any(steps <= 0):
-            raise ValueError(f"{path}: column 't' must increase strictly")
-        step = float(np.median(steps))
-        if np.max(np.abs(steps - step)) > 1e-6 * step + 1e-12:
-            raise ValueError(
-                f"{path}: column 't' is not uniformly spaced "
-                f"(steps from {steps.min():g} to {steps.max():g} s)"
-            )
-        if dt is not None and abs(dt - step) > 1e-6 * step:
-            raise ValueError(f"{path}: dt={dt:g} s disagrees with column 't' (step {step:g} s)")
-        dt = step
-    elif dt is None:
-        raise ValueError(f"{path}: no 't' column; give the sample time (--dt)")
-    if not (np.isfinite(dt) and dt > 0):
-        raise ValueError(f"dt must be a positive number of seconds, got {dt!r}")
-    u = data[:, [col[c] for c in inputs]]
-    y = data[:, [col[c] for c in outputs]]
-    return EngineRecord(u, y, float(dt), tuple(inputs), tuple(outputs))
+    """Read an engine record from CSV; columns are chosen by name (see :func:`read_columns`)."""
+    data, dt = read_columns(path, [*inputs, *outputs], dt)
+    return EngineRecord(data[:, : len(inputs)], data[:, len(inputs) :], dt, tuple(inputs), tuple(outputs))
 
 
 def write_record(path: str | Path, record: EngineRecord) -> None:
     """Write a record as CSV with columns t, inputs, outputs."""
-    table = np.column_stack([record.t, record.u, record.y])
-    header = ",".join(["t", *record.input_names, *record.output_names])
-    np.savetxt(path, table, delimiter=",", header=header, comments="", fmt="%.17g")
+    write_columns(
+        path, record.dt, [*record.input_names, *record.output_names], np.column_stack([record.u, record.y])
+    )
 
 
 def identify_record(record: EngineRecord, **options) -> Identification:

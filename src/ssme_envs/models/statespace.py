@@ -105,7 +105,7 @@ def asymmetric_gain(u: np.ndarray, lam: np.ndarray) -> np.ndarray:
     return u + (np.asarray(lam, dtype=float) - 1.0) * np.abs(u)
 
 
-def _matrix(value: Any, name: str, shape: tuple[int | None, int | None]) -> np.ndarray:
+def as_matrix(value: Any, name: str, shape: tuple[int | None, int | None]) -> np.ndarray:
     try:
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError) as exc:
@@ -151,12 +151,12 @@ class AlphaCanonicalModel:
     fit: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        self.A = _matrix(self.A, "A", (None, None))
+        self.A = as_matrix(self.A, "A", (None, None))
         n = self.A.shape[0]
         if self.A.shape[1] != n:
             raise ValueError(f"A must be square, got shape {self.A.shape}")
-        self.B = _matrix(self.B, "B", (n, None))
-        self.C = _matrix(self.C, "C", (None, n))
+        self.B = as_matrix(self.B, "B", (n, None))
+        self.C = as_matrix(self.C, "C", (None, n))
         m, p = self.B.shape[1], self.C.shape[0]
         if not (isinstance(self.dt, int | float) and np.isfinite(self.dt) and self.dt > 0):
             raise ValueError(f"dt must be a positive number of seconds, got {self.dt!r}")
