@@ -102,7 +102,7 @@ def test_cli_bad_csv_exits_2_with_one_line(tmp_path, capsys, text, extra, messag
     ("argv", "message"),
     [
         (["identify", "engine"], "--out"),
-        (["identify", "nozzle", "--out", "x"], "invalid choice"),
+        (["identify", "turbopump", "--out", "x"], "invalid choice"),
         (["identify", "engine", "--out", "{out}", "--indices", "2,x"], "--indices"),
         (["identify", "engine", "--out", "{out}", "--data", "{missing}"], "no such file"),
         (["identify", "engine", "--out", "{out}", "--dt", "0.04"], "--dt needs --data"),

@@ -15,7 +15,7 @@ from ssme_envs.identification.pipeline import EngineRecord, LevelResult
 from ssme_envs.models.statespace import AlphaCanonicalModel
 
 
-def _pyplot():
+def agg_pyplot():
     import matplotlib
 
     matplotlib.use("Agg")
@@ -26,7 +26,7 @@ def _pyplot():
 
 def plot_comparison(path: Path, record: EngineRecord, model: AlphaCanonicalModel, title: str) -> None:
     """Measured outputs vs the state-variable filter (eq 50) and the model (eqs 51-52)."""
-    plt = _pyplot()
+    plt = agg_pyplot()
     filt = filter_prediction(model, record.u, record.y)
     sim = model_prediction(model, record.u)
     n_out = record.y.shape[1]
@@ -53,7 +53,7 @@ def plot_comparison(path: Path, record: EngineRecord, model: AlphaCanonicalModel
 
 def plot_structure_search(path: Path, ident: Identification, rank_tol: float) -> None:
     """Bar chart of the rank-search ratios with the decision threshold."""
-    plt = _pyplot()
+    plt = agg_pyplot()
     search = ident.search
     fig, ax = plt.subplots(figsize=(7, 3))
     names = ident.model.output_names

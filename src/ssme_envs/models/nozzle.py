@@ -239,12 +239,26 @@ def simulate_nozzle(
     if tau.ndim == 2 and core.n != n:
         raise ValueError(f"{core.n} parameter sets for {n} torque sequences")
     horizon = tau.shape[-1]
+    if core.n == 1:  # the float path of _rk4 without the per-sample bookkeeping of NozzleCore.step
+        limit, h, steps, params = (
+            core.torque_limit,
+            core.dt / core.substeps,
+            core.substeps,
+            core._scalar_params,
+        )
+        x = v = w = 0.0
+        angles = [0.0] * horizon
+        for k, torque_k in enumerate(np.ravel(tau).tolist()):
+            angles[k] = x
+            x, v, w = _rk4(x, v, w, min(max(torque_k, -limit), limit), h, steps, params)
+        out = np.array(angles)
+        return out[None] if tau.ndim == 2 else out
     out = np.empty((core.n, horizon))
     columns = tau.T if tau.ndim == 2 else tau[:, None]
     for k in range(horizon):
         out[:, k] = core.state[0]
         core.step(columns[k])
-    return out if tau.ndim == 2 or core.n > 1 else out[0]
+    return out
 
 
 def _float_power(base: float, exponent: float) -> float:

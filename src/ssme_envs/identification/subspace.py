@@ -1,0 +1,554 @@
+"""Subspace identification of the Kalman filter: DSR_e (Di Ruscio 2008, 2009).
+
+Identifies the innovations form of a MIMO system from one input/output record,
+
+    x(k+1) = A x(k) + B u(k) + K e(k),   y(k) = C x(k) + D u(k) + e(k),
+
+with ``e`` white (the one-step prediction error of the Kalman filter). The data are deviations
+from an operating point, one row per sample. The steps:
+
+1. **Innovations.** With the predictor ``x(k+1) = (A - K C) x(k) + (B - K D) u(k) + K y(k)``,
+   the state is a linear function of the past ``J`` inputs and outputs up to the term
+   ``(A - K C)^J x(k - J)``, which vanishes as ``J`` grows. So the least-squares projection of
+   ``y(k)`` on ``u(k)`` and on ``u, y`` at lags ``1..J`` leaves the innovations ``e(k)`` as
+   its residual (a high-order ARX fit, solved by ``lstsq``).
+
+2. **Observability matrix.** With ``e`` now a known input, the future outputs (``L + 1``
+   block rows) obey ``Y_f = O X_f + H_u U_f + H_e E_f`` and ``X_f`` lies in the row space of
+   the past data ``W_p``. One LQ factorization (a QR of the transposed stack
+   ``[U_f; E_f; U_p; Y_p; Y_f]``) gives ``Z``, the part of ``Y_f`` that lies in ``W_p`` once
+   ``U_f`` and ``E_f`` are removed; ``Z = O M``, so the left singular vectors of ``Z`` span the
+   extended observability matrix ``O`` (``L + 1`` block rows, ``n`` columns).
+
+3. **Order** from the singular values of ``Z`` (rule in :func:`dsr_e`).
+
+4. **Realization.** ``C`` is the first block row of ``O``, ``A`` the least-squares solution of
+   the shift invariance ``O[p:] = O[:-p] A``. ``B``, ``D``, ``K`` and the state at the start
+   of the fit are linear in the output given ``A``, ``C`` and the innovations, and come from
+   one least-squares regression on simulated unit responses.
+
+5. **Past horizon** ``J`` so that ``(A - K C)^J`` is negligible (rule in :func:`dsr_e`).
+
+References: D. Di Ruscio, "Subspace system identification of the Kalman filter: open and closed
+loop systems", Proc. IMECS 2008; "Closed and open loop subspace system identification of the
+Kalman filter", Modeling, Identification and Control 30(2), 2009.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg
+import scipy.signal
+
+from ssme_envs.identification.alpha_canonical import check_record
+
+DEFAULT_MAX_ORDER = 10
+# Target for the neglected term of the innovations estimate: rho(A - K C)^J below this.
+PREDICTOR_DECAY = 1e-3
+# Normalized singular values below this are round-off; no order is placed behind one of them.
+SINGULAR_VALUE_FLOOR = 1e-10
+# An LQ pivot below this fraction of its row's norm marks a row dependent on the rows before it.
+PIVOT_TOL = 1e-9
+# Innovations below this fraction of the output's spread mean a noise-free record (K = 0).
+NOISE_FREE_TOL = 1e-9
+# The stacked data matrix must have at least this many columns per row ...
+MIN_COLUMNS_PER_ROW = 2
+# ... and the automatic past horizon keeps at least this many (statistical headroom).
+AUTO_COLUMNS_PER_ROW = 6
+# Refinements of the automatic past horizon after the first pass.
+HORIZON_REFINEMENTS = 2
+
+
+@dataclass(frozen=True, eq=False)
+class InnovationsModel:
+    """Discrete innovations-form model ``x+ = A x + B u + K e``, ``y = C x + D u + e``.
+
+    Attributes
+    ----------
+    A, B, C, D, K : ndarray
+        Shapes (n, n), (n, m), (p, n), (p, m), (n, p); inputs and outputs in the units of the
+        identification record.
+    dt : float
+        Sample time, s.
+    """
+
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    D: np.ndarray
+    K: np.ndarray
+    dt: float
+
+    def __post_init__(self) -> None:
+        mats = {name: np.array(getattr(self, name), dtype=float, ndmin=2) for name in "ABCDK"}
+        n, m, p = mats["A"].shape[0], mats["B"].shape[1], mats["C"].shape[0]
+        expected = {"A": (n, n), "B": (n, m), "C": (p, n), "D": (p, m), "K": (n, p)}
+        for name, shape in expected.items():
+            if mats[name].shape != shape:
+                raise ValueError(f"{name} has shape {mats[name].shape}, expected {shape}")
+            if not np.all(np.isfinite(mats[name])):
+                raise ValueError(f"{name} has NaN or inf entries")
+            mats[name].setflags(write=False)
+            object.__setattr__(self, name, mats[name])
+        if not (isinstance(self.dt, int | float) and np.isfinite(self.dt) and self.dt > 0):
+            raise ValueError(f"dt must be a positive number of seconds, got {self.dt!r}")
+        object.__setattr__(self, "dt", float(self.dt))
+
+    @property
+    def n_states(self) -> int:
+        return self.A.shape[0]
+
+    @property
+    def n_inputs(self) -> int:
+        return self.B.shape[1]
+
+    @property
+    def n_outputs(self) -> int:
+        return self.C.shape[0]
+
+    def poles(self) -> np.ndarray:
+        """Eigenvalues of ``A`` (discrete poles, dimensionless)."""
+        return np.linalg.eigvals(self.A)
+
+    def simulate(self, u: np.ndarray, y: np.ndarray | None = None) -> np.ndarray:
+        """Model output, shape (T, p).
+
+        Parameters
+        ----------
+        u : array, shape (T, m) or (T,) for one input
+            Inputs.
+        y : array, shape (T, p) or (T,), optional
+            Measured outputs. When given, the result is the one-step prediction of the Kalman
+            filter ``x+ = A x + B u + K (y - C x - D u)``, ``y_hat = C x + D u``; otherwise the
+            pure simulation ``x+ = A x + B u``. Both start from the zero state.
+        """
+        u = _as_columns(u, "u")
+        if u.shape[1] != self.n_inputs:
+            raise ValueError(f"u has {u.shape[1]} channels but the model has {self.n_inputs} inputs")
+        if y is None:
+            a, b_in, inputs = self.A, self.B, u
+        else:
+            y = _as_columns(y, "y")
+            if y.shape != (u.shape[0], self.n_outputs):
+                raise ValueError(f"y has shape {y.shape}, expected {(u.shape[0], self.n_outputs)}")
+            a = self.A - self.K @ self.C
+            b_in = np.hstack([self.B - self.K @ self.D, self.K])
+            inputs = np.hstack([u, y])
+        if not np.all(np.isfinite(inputs)):
+            raise ValueError("u and y must be finite")
+        states = np.empty((u.shape[0], self.n_states))
+        x = np.zeros(self.n_states)
+        drive = inputs @ b_in.T
+        for k in range(u.shape[0]):
+            states[k] = x
+            x = a @ x + drive[k]
+        return states @ self.C.T + u @ self.D.T
+
+
+@dataclass
+class SubspaceResult:
+    """Outcome of :func:`dsr_e`.
+
+    Attributes
+    ----------
+    model : InnovationsModel
+        The identified model.
+    singular_values : ndarray
+        Singular values of the projected data matrix ``Z``, largest first (order selection).
+    order : int
+        Number of states.
+    past_horizon : int
+        Past horizon ``J`` used, samples.
+    future_horizon : int
+        Future horizon ``L`` used: the extended observability matrix has ``L + 1`` block rows.
+    """
+
+    model: InnovationsModel
+    singular_values: np.ndarray
+    order: int
+    past_horizon: int
+    future_horizon: int
+
+
+def _as_columns(x: np.ndarray, name: str) -> np.ndarray:
+    x = np.asarray(x, dtype=float)
+    x = x[:, None] if x.ndim == 1 else x
+    if x.ndim != 2:
+        raise ValueError(f"{name} must have shape (samples, channels), got {x.shape}")
+    return x
+
+
+def _positive_int(value: int | None, name: str) -> int | None:
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 1:
+        raise ValueError(f"{name} must be a positive integer, got {value!r}")
+    return int(value)
+
+
+def _block_hankel(x: np.ndarray, first: int, rows: int, cols: int) -> np.ndarray:
+    """Block row ``i`` holds ``x[first + i + c]`` in column ``c``; shape (rows * channels, cols)."""
+    return np.vstack([x[first + i : first + i + cols].T for i in range(rows)])
+
+
+def _stack_rows(m: int, p: int, past: int, future: int, noise_free: bool) -> int:
+    """Rows of ``[U_f; E_f; U_p; Y_p; Y_f]``."""
+    return (future + 1) * (m + p + (0 if noise_free else p)) + past * (m + p)
+
+
+def _samples_needed(m: int, p: int, past: int, future: int, per_row: int) -> int:
+    """Record length giving ``per_row`` columns per row of the stacked data matrix."""
+    return past + future + per_row * _stack_rows(m, p, past, future, noise_free=False)
+
+
+def _past_horizon_cap(n_samples: int, m: int, p: int, future: int) -> int:
+    """Largest past horizon that keeps ``AUTO_COLUMNS_PER_ROW`` columns per row."""
+    fixed = future + AUTO_COLUMNS_PER_ROW * (future + 1) * (m + 2 * p)
+    return (n_samples - fixed) // (1 + AUTO_COLUMNS_PER_ROW * (m + p))
+
+
+def _innovations(u: np.ndarray, y: np.ndarray, past: int) -> np.ndarray:
+    """Residual of ``y(k)`` projected on ``u(k)`` and ``u, y`` at lags 1..past, k = past..T-1."""
+    horizon = u.shape[0]
+    lagged = [u[past:]]
+    for lag in range(1, past + 1):
+        lagged += [u[past - lag : horizon - lag], y[past - lag : horizon - lag]]
+    phi = np.hstack(lagged)
+    # Rank-revealing QR least squares (gelsy): a noise-free record makes the output lags dependent.
+    theta, *_ = scipy.linalg.lstsq(phi, y[past:], lapack_driver="gelsy", check_finite=False)
+    return y[past:] - phi @ theta
+
+
+def _projected_future(
+    u: np.ndarray, y: np.ndarray, e: np.ndarray, past: int, future: int, noise_free: bool
+) -> np.ndarray:
+    """``Z``: the future outputs, ``U_f`` and ``E_f`` removed, projected on the past data.
+
+    Raises ValueError when the future-input Hankel matrix is rank-deficient.
+    """
+    m, p = u.shape[1], y.shape[1]
+    cols = u.shape[0] - past - future
+    blocks = [_block_hankel(u, past, future + 1, cols)]
+    if not noise_free:
+        blocks.append(_block_hankel(e, 0, future + 1, cols))  # e[0] is sample `past`
+    n_removed = sum(b.shape[0] for b in blocks)
+    blocks += [
+        _block_hankel(u, 0, past, cols),
+        _block_hankel(y, 0, past, cols),
+        _block_hankel(y, past, future + 1, cols),
+    ]
+    stack = np.vstack(blocks)
+    tri = np.linalg.qr(stack.T, mode="r")  # stack = tri.T @ Q.T: the LQ factorization
+    pivots = np.abs(np.diag(tri)) / np.maximum(np.linalg.norm(stack, axis=1), np.finfo(float).tiny)
+    n_uf = (future + 1) * m
+    if pivots[:n_uf].min() < PIVOT_TOL:
+        raise ValueError(
+            f"the inputs are not persistently exciting of order {future + 1} (the future-input Hankel "
+            f"matrix with future_horizon={future} is rank-deficient): use a richer input such as a "
+            "PRBS or white noise, or a smaller future_horizon"
+        )
+    n_past = past * (m + p)
+    z = tri[n_removed : n_removed + n_past, n_removed + n_past :].T.copy()
+    # A past row that adds nothing new (noise-free outputs, a periodic input) has a round-off
+    # pivot; its orthogonal direction is arbitrary, so its column of Z is dropped.
+    z[:, pivots[n_removed : n_removed + n_past] < PIVOT_TOL] = 0.0
+    return z
+
+
+def _select_order(singular_values: np.ndarray, max_order: int) -> int:
+    """Order at the largest drop in log10 of the normalized singular values (see dsr_e)."""
+    s = singular_values / singular_values[0]
+    logs = np.log10(np.maximum(s, np.finfo(float).tiny))
+    candidates = [n for n in range(1, max_order + 1) if s[n - 1] > SINGULAR_VALUE_FLOOR]
+    gaps = [logs[n - 1] - logs[n] for n in candidates]
+    return candidates[int(np.argmax(gaps))]
+
+
+def _shift_invariance(obs: np.ndarray, p: int) -> tuple[np.ndarray, np.ndarray]:
+    """(A, C) from the extended observability matrix."""
+    a, *_ = np.linalg.lstsq(obs[:-p], obs[p:], rcond=None)
+    return a, obs[:p].copy()
+
+
+def _output_powers(a: np.ndarray, c: np.ndarray, count: int) -> np.ndarray:
+    """``C A^k`` for k = 0..count-1, shape (count, p, n), by doubling."""
+    powers = c[None]
+    a_pow = a
+    while powers.shape[0] < count:
+        powers = np.concatenate([powers, powers @ a_pow])
+        a_pow = a_pow @ a_pow
+    return powers[:count]
+
+
+def _input_matrices(
+    a: np.ndarray, c: np.ndarray, u: np.ndarray, y: np.ndarray, e: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(B, D, K) by least squares given A, C, the inputs and the innovations.
+
+    Choice: regression on simulated unit responses rather than on an estimated state sequence.
+    Given A and C the output ``y(k) - e(k) = C A^k x0 + sum_j C A^(k-1-j) [B K] [u; e](j) + D u(k)``
+    is linear in ``x0``, ``B``, ``K`` and ``D``, so one least-squares fit over the whole record
+    gives them all, with no state estimate, no further horizon, and an exact answer on noise-free
+    data. The unit responses are convolutions of ``C A^k`` with each input channel (FFT).
+    ``e`` is None for a noise-free record (then K = 0).
+    """
+    horizon, m = u.shape
+    p, n = c.shape
+    drive = u if e is None else np.hstack([u, e])
+    target = y if e is None else y - e
+    n_drive = drive.shape[1]
+    powers = _output_powers(a, c, horizon)  # (T, p, n)
+    conv = scipy.signal.fftconvolve(powers[:, :, :, None], drive[:, None, None, :], axes=0)[:horizon]
+    responses = np.zeros((horizon, p, n, n_drive))
+    responses[1:] = conv[:-1]  # state k sums inputs up to k-1
+    feedthrough = np.zeros((horizon, p, p, m))
+    for i in range(p):
+        feedthrough[:, i, i, :] = u
+    phi = np.concatenate(
+        [powers, responses.reshape(horizon, p, n * n_drive), feedthrough.reshape(horizon, p, p * m)], axis=2
+    ).reshape(horizon * p, -1)
+    if not np.all(np.isfinite(phi)):
+        raise ValueError(
+            f"the identified A is unstable (spectral radius {np.max(np.abs(np.linalg.eigvals(a))):.4g}) "
+            "and its unit responses overflow over the record: try another order or horizons"
+        )
+    theta, _, rank, _ = np.linalg.lstsq(phi, target.reshape(-1), rcond=None)
+    if rank < phi.shape[1]:
+        raise ValueError(
+            f"the inputs do not determine B and D (regression rank {rank} of {phi.shape[1]}): "
+            "use a richer input, a lower order or longer horizons"
+        )
+    gains = theta[n : n + n * n_drive].reshape(n, n_drive)
+    d = theta[n + n * n_drive :].reshape(p, m)
+    k = gains[:, m:] if e is not None else np.zeros((n, p))
+    return gains[:, :m], d, k
+
+
+def _identify_once(
+    u: np.ndarray,
+    y: np.ndarray,
+    dt: float,
+    past: int,
+    future: int,
+    order: int | None,
+    max_order: int,
+) -> tuple[InnovationsModel, np.ndarray, int, bool]:
+    """One DSR_e pass at fixed horizons: (model, singular values, order, noise-free)."""
+    p = y.shape[1]
+    e = _innovations(u, y, past)
+    spread = np.linalg.norm(y - y.mean(axis=0))
+    noise_free = bool(np.linalg.norm(e) <= NOISE_FREE_TOL * spread)
+    z = _projected_future(u, y, e, past, future, noise_free)
+    left, singular_values, _ = np.linalg.svd(z, full_matrices=False)
+    if singular_values[0] <= NOISE_FREE_TOL * math.sqrt(future + 1) * spread:
+        raise ValueError(
+            "the projected future outputs are zero: the outputs have no dynamics beyond a direct "
+            f"feedthrough of the inputs, or past_horizon={past} is too short for the innovations "
+            "estimate (the innovations then absorb the state)"
+        )
+    most = min(future * p, len(singular_values) - 1)
+    if order is None:
+        order = _select_order(singular_values, min(max_order, most))
+    elif order > most:
+        raise ValueError(
+            f"order={order} needs future_horizon >= {math.ceil(order / p)} and past_horizon >= "
+            f"{math.ceil((order + 1) / (u.shape[1] + p))} (got {future} and {past})"
+        )
+    obs = left[:, :order] * np.sqrt(singular_values[:order])
+    a, c = _shift_invariance(obs, p)
+    b, d, k = _input_matrices(a, c, u[past:], y[past:], None if noise_free else e)
+    return InnovationsModel(a, b, c, d, k, dt), singular_values, order, noise_free
+
+
+def dsr_e(
+    u: np.ndarray,
+    y: np.ndarray,
+    dt: float,
+    order: int | None = None,
+    past_horizon: int | None = None,
+    future_horizon: int | None = None,
+    max_order: int = DEFAULT_MAX_ORDER,
+) -> SubspaceResult:
+    """Identify the Kalman-filter innovations form by DSR_e.
+
+    Parameters
+    ----------
+    u : array, shape (T, m) or (T,)
+        Inputs (deviations from the operating point), one row per sample.
+    y : array, shape (T, p) or (T,)
+        Outputs (deviations), same length.
+    dt : float
+        Sample time, s.
+    order : int, optional
+        Number of states; selected from the singular values when omitted.
+    past_horizon : int, optional
+        ``J``: lags of ``u`` and ``y`` in the innovations estimate and in the past data ``W_p``.
+        Chosen automatically when omitted (rule below).
+    future_horizon : int, optional
+        ``L``: the future data have ``L + 1`` block rows, so orders up to ``L p`` can be found.
+        Default ``max(ceil(max_order / p), 2)``.
+    max_order : int
+        Largest order the automatic selection considers.
+
+    Returns
+    -------
+    SubspaceResult
+
+    Notes
+    -----
+    **Order selection.** The singular values ``s_1 >= s_2 >= ...`` of ``Z`` are normalized by
+    ``s_1``; the order is the ``n`` in ``1..min(max_order, L p)`` with the largest drop
+    ``log10 s_n - log10 s_(n+1)``, among the ``n`` whose ``s_n / s_1`` exceeds 1e-10 (below that
+    the values are round-off, and gaps between them mean nothing). Noise-free data show a drop
+    of ten decades or more at the true order; with noise the values beyond the order sit on a
+    floor that falls as ``1 / sqrt(T)`` relative to ``s_1``. A weak, barely excited mode can
+    have a smaller drop than a strong one: inspect ``singular_values`` and pass ``order=``.
+
+    **Past horizon.** The innovations estimate neglects ``(A - K C)^J x(k - J)``. Without
+    ``past_horizon``, a first pass uses ``J = max(2 (L + 1), 10)``; then, with ``rho`` the spectral
+    radius of ``A - K C`` of the result, if ``rho^J > 1e-3`` the identification is redone with
+    ``J = ceil(log(1e-3) / log(rho))`` (at most two such refinements). ``J`` is capped so that
+    the stacked data matrix keeps at least 6 columns per row (about ``T / (6 (m + p))``); a
+    noise-free record (innovations below 1e-9 of the output spread) gets ``K = 0`` and no
+    refinement, since its outputs are exactly linear in ``n`` past samples. An unstable
+    predictor (``rho >= 1``) stops the refinement. ``past_horizon`` reports the ``J`` used.
+
+    Raises
+    ------
+    ValueError
+        Bad shapes, NaN/inf (naming channel and sample), constant or linearly dependent inputs,
+        inputs not persistently exciting, a record too short for the horizons (with the length
+        needed), or bad arguments.
+    """
+    if not (isinstance(dt, int | float) and np.isfinite(dt) and dt > 0):
+        raise ValueError(f"dt must be a positive number of seconds, got {dt!r}")
+    order = _positive_int(order, "order")
+    past_horizon = _positive_int(past_horizon, "past_horizon")
+    future_horizon = _positive_int(future_horizon, "future_horizon")
+    max_order = _positive_int(max_order, "max_order")
+    u, y = _as_columns(u, "u"), _as_columns(y, "y")
+    if u.shape[1] == 0 or y.shape[1] == 0:
+        raise ValueError("at least one input and one output are needed")
+    u, y = check_record(u, y)
+    n_samples, m = u.shape
+    p = y.shape[1]
+
+    future = future_horizon if future_horizon is not None else max(math.ceil(max_order / p), 2)
+    if past_horizon is not None:
+        past = past_horizon
+    else:
+        past = min(max(2 * (future + 1), 10), max(_past_horizon_cap(n_samples, m, p, future), 1))
+    needed = _samples_needed(m, p, past, future, MIN_COLUMNS_PER_ROW)
+    if n_samples < needed:
+        raise ValueError(
+            f"the record has {n_samples} samples; past_horizon={past} and future_horizon={future} "
+            f"need at least {needed} (use a longer record or smaller horizons)"
+        )
+
+    model, singular_values, found, noise_free = _identify_once(u, y, dt, past, future, order, max_order)
+    if past_horizon is None and not noise_free:
+        cap = _past_horizon_cap(n_samples, m, p, future)
+        for _ in range(HORIZON_REFINEMENTS):
+            rho = float(np.max(np.abs(np.linalg.eigvals(model.A - model.K @ model.C))))
+            if rho**past <= PREDICTOR_DECAY or rho >= 1.0:
+                break
+            wanted = min(math.ceil(math.log(PREDICTOR_DECAY) / math.log(rho)), cap)
+            if wanted <= past:
+                break
+            past = wanted
+            model, singular_values, found, noise_free = _identify_once(
+                u, y, dt, past, future, order, max_order
+            )
+    return SubspaceResult(model, singular_values, found, past, future)
+
+
+def to_continuous(model: InnovationsModel) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Continuous-time (Ac, Bc, Cc, Dc) whose zero-order-hold discretization is the model.
+
+    The exact inverse of ZOH: ``logm([[A, B], [0, I]]) / dt`` holds ``[[Ac, Bc], [0, 0]]``.
+    ``Ac`` in 1/s, ``Bc`` in output units per input unit per s; ``Cc = C``, ``Dc = D``.
+
+    Raises
+    ------
+    ValueError
+        When ``A`` has an eigenvalue at zero or on the negative real axis: no real
+        continuous system sampled with a zero-order hold gives such a pole.
+    """
+    n, m = model.n_states, model.n_inputs
+    for pole in model.poles():
+        if abs(pole.imag) <= 1e-12 * max(abs(pole), 1e-300) and pole.real <= 0:
+            raise ValueError(
+                f"A has the eigenvalue {pole.real:.6g} on the negative real axis or at zero: the "
+                "zero-order hold cannot be inverted (no real continuous-time equivalent)"
+            )
+    block = np.zeros((n + m, n + m))
+    block[:n, :n] = model.A
+    block[:n, n:] = model.B
+    block[n:, n:] = np.eye(m)
+    log_block = scipy.linalg.logm(block)
+    if np.iscomplexobj(log_block):
+        if np.max(np.abs(log_block.imag)) > 1e-8 * max(np.max(np.abs(log_block.real)), 1.0):
+            raise ValueError("the matrix logarithm of the model is not real: no continuous equivalent")
+        log_block = log_block.real
+    gen = log_block / model.dt
+    return gen[:n, :n], gen[:n, n:], model.C.copy(), model.D.copy()
+
+
+def second_order_parameters(model: InnovationsModel) -> dict[str, float | list[float]]:
+    """Physical parameters of a SISO second-order model ``J x'' + b x' + k x = tau``.
+
+    The continuous transfer function (inverse ZOH, :func:`to_continuous`) is written
+    ``(b2 s^2 + b1 s + b0) / (s^2 + a1 s + a0)``; the physical model has
+    ``(1/J) / (s^2 + (b/J) s + k/J)``, so ``J = 1/b0``, ``b = a1 J``, ``k = a0 J``. An identified
+    model usually also has small ``b1`` and ``b2`` (sampling zeros, noise), reported as they are.
+
+    Returns
+    -------
+    dict
+        ``numerator`` [b2, b1, b0] and ``denominator`` [1, a1, a0] (s-polynomials, highest power
+        first); ``numerator_s_coefficient`` b1; ``J`` (input units s^2 per output unit), ``b``
+        (input units s per output unit), ``k`` (input units per output unit);
+        ``natural_frequency_hz`` sqrt(a0) / 2 pi; ``damping_ratio`` a1 / (2 sqrt(a0));
+        ``resonance_frequency_hz`` the peak of the magnitude, ``f_n sqrt(1 - 2 zeta^2)``, NaN when
+        ``zeta >= 1/sqrt(2)`` (no peak).
+
+    Raises
+    ------
+    ValueError
+        Not SISO, not second order, no DC gain (b0 = 0), or not an oscillator (a0 <= 0).
+    """
+    if model.n_inputs != 1 or model.n_outputs != 1:
+        raise ValueError(
+            f"a single-input single-output model is needed, got {model.n_inputs} inputs and "
+            f"{model.n_outputs} outputs"
+        )
+    if model.n_states != 2:
+        raise ValueError(f"a second-order model is needed, got order {model.n_states}")
+    ac, bc, cc, dc = to_continuous(model)
+    num, den = scipy.signal.ss2tf(ac, bc, cc, dc)
+    num = np.asarray(num, dtype=float).ravel() / den[0]
+    den = np.asarray(den, dtype=float) / den[0]
+    b2, b1, b0 = num[-3:]
+    _, a1, a0 = den
+    if abs(b0) <= 1e-12 * max(np.max(np.abs(num)), 1e-300):
+        raise ValueError("the model has no static gain (b0 = 0): J = 1/b0 is undefined")
+    if a0 <= 0:
+        raise ValueError(f"the model is not an oscillator (a0 = {a0:.6g} <= 0): no natural frequency")
+    inertia = 1.0 / b0
+    omega_n = math.sqrt(a0)
+    zeta = a1 / (2.0 * omega_n)
+    resonance = omega_n * math.sqrt(1.0 - 2.0 * zeta**2) if zeta < 1.0 / math.sqrt(2.0) else math.nan
+    return {
+        "numerator": [float(b2), float(b1), float(b0)],
+        "denominator": [1.0, float(a1), float(a0)],
+        "numerator_s_coefficient": float(b1),
+        "J": float(inertia),
+        "b": float(a1 * inertia),
+        "k": float(a0 * inertia),
+        "natural_frequency_hz": omega_n / (2.0 * math.pi),
+        "damping_ratio": float(zeta),
+        "resonance_frequency_hz": resonance / (2.0 * math.pi),
+    }
