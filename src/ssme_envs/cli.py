@@ -214,11 +214,8 @@ def _identify_nozzle(args: argparse.Namespace) -> int:
             if getattr(args, flag) is not None:
                 raise _UsageError(f"--{flag} needs --data (the embedded bench test sets its own)")
         truth = published_nozzle("bouc_wen")
-        print("simulating the bench test (2.5 kHz, 59.8 s, decimated to 0.008 s) ...")
-        records = {
-            "identification": npipe.bench_experiment(truth, seed=seed),
-            "validation": npipe.validation_experiment(truth, seed=seed + 1),
-        }
+        print("simulating the bench test (2.5 kHz, 59.8 s, decimated to 0.008 s) and identifying ...")
+        ident, records = npipe.run_default(seed, args.workers, order, args.normalization_a)
         note = (
             "Bench data simulated from the paper's Table 1 Bouc-Wen nozzle (the truth of this report): "
             "a PRBS torque keeping the angle within +-3 deg, 2.5 kHz acquisition with sensor noise (std "
@@ -232,19 +229,17 @@ def _identify_nozzle(args: argparse.Namespace) -> int:
                 raise ValueError(f"{args.validate}: sample time {check.dt:g} s differs from the data's")
             records["validation"] = check
         note = f"Data: {args.data}."
+        print("identifying: DSR_e linear model, then the Bouc-Wen joint (evolutionary search, least squares)")
+        ident = npipe.identify_nozzle(
+            records["identification"],
+            seed=seed,
+            workers=args.workers,
+            order=order,
+            normalization_A=args.normalization_a,
+        )
+        if "validation" in records:
+            ident.model.fit["validation_record"] = npipe.validate_nozzle(ident.model, records["validation"])
     _make_dir(args.out)
-    print(
-        "identifying: DSR_e linear model, then the Bouc-Wen joint (evolutionary search + least squares) ..."
-    )
-    ident = npipe.identify_nozzle(
-        records["identification"],
-        seed=seed,
-        workers=args.workers,
-        order=order,
-        normalization_A=args.normalization_a,
-    )
-    if "validation" in records:
-        ident.model.fit["validation_record"] = npipe.validate_nozzle(ident.model, records["validation"])
     ident.model.save(args.out / "model.json")
     if args.data is None:
         (args.out / "data").mkdir(exist_ok=True)

@@ -34,11 +34,12 @@ import scipy.optimize
 import scipy.signal
 import scipy.stats
 
-from ssme_envs.models.nozzle import NozzleParameters, simulate_nozzle
+from ssme_envs.models.nozzle import NozzleParameters, recommended_substeps, simulate_nozzle
 
 NORMALIZED_NAMES = ("J", "b", "k_el", "k_hys", "beta_n", "gamma_n", "n")
 DEFAULT_NORMALIZATION_A = 0.35
-FIT_SUBSTEPS = 2  # RK4 steps per sample while fitting (1e-3 relative integration error at 0.008 s)
+SEARCH_SUBSTEPS = 2  # RK4 steps per sample for the first refinement (1e-3 relative error at 0.008 s)
+MAX_FIT_SUBSTEPS = 8  # cap of the final refinement's substeps (recommended_substeps otherwise)
 _UPSAMPLE = 2  # path increments per sample when integrating w along the measured angle
 SEARCH_SAMPLES = 2000  # the global search looks at the first 16 s; the refinement at all of it
 
@@ -185,11 +186,9 @@ class _Simulator:
     def __init__(self, tau: np.ndarray, dt: float, torque_limit: float) -> None:
         self.tau, self.dt, self.torque_limit = tau, dt, torque_limit
 
-    def __call__(self, theta: np.ndarray) -> np.ndarray:
+    def __call__(self, theta: np.ndarray, substeps: int) -> np.ndarray:
         params = dict(zip(NORMALIZED_NAMES, theta, strict=True))
-        return simulate_nozzle(
-            params, self.tau, self.dt, substeps=FIT_SUBSTEPS, torque_limit=self.torque_limit
-        )
+        return simulate_nozzle(params, self.tau, self.dt, substeps=substeps, torque_limit=self.torque_limit)
 
 
 _WORKER: dict[str, _Simulator] = {}
@@ -199,27 +198,29 @@ def _init_worker(simulator: _Simulator) -> None:
     _WORKER["simulate"] = simulator
 
 
-def _run_worker(theta: np.ndarray) -> np.ndarray:
-    return _WORKER["simulate"](theta)
+def _run_worker(job: tuple[np.ndarray, int]) -> np.ndarray:
+    return _WORKER["simulate"](*job)
 
 
 class _Residuals:
     """Output-error residuals with a forward-difference Jacobian whose columns run in a pool."""
 
-    def __init__(self, simulator: _Simulator, measured: np.ndarray, pool) -> None:
-        self.simulate, self.measured, self.pool = simulator, measured, pool
+    def __init__(self, simulator: _Simulator, measured: np.ndarray, pool, substeps: int) -> None:
+        self.simulate, self.measured, self.pool, self.substeps = simulator, measured, pool, substeps
         self._last: tuple[bytes, np.ndarray] | None = None
 
     def __call__(self, theta: np.ndarray) -> np.ndarray:
         if self._last is None or self._last[0] != theta.tobytes():
-            self._last = (theta.tobytes(), self.simulate(theta) - self.measured)
+            self._last = (theta.tobytes(), self.simulate(theta, self.substeps) - self.measured)
         return self._last[1]
 
     def jacobian(self, theta: np.ndarray) -> np.ndarray:
         base = self(theta)
         steps = 1e-7 * np.maximum(np.abs(theta), 1e-3)
-        shifted = [theta + np.eye(theta.size)[i] * steps[i] for i in range(theta.size)]
-        runs = self.pool.map(_run_worker, shifted) if self.pool is not None else map(self.simulate, shifted)
+        jobs = [(theta + np.eye(theta.size)[i] * steps[i], self.substeps) for i in range(theta.size)]
+        runs = (
+            self.pool.map(_run_worker, jobs) if self.pool is not None else (self.simulate(*j) for j in jobs)
+        )
         return np.column_stack([(run - self.measured - base) / h for run, h in zip(runs, steps, strict=True)])
 
 
@@ -314,23 +315,32 @@ def fit_bouc_wen(
 
     simulator = _Simulator(tau, dt, torque_limit)
     pool = _make_pool(workers, simulator)
-    try:
-        resid = _Residuals(simulator, x, pool)
-        refined = scipy.optimize.least_squares(
+
+    def refine(theta: np.ndarray, substeps: int, max_nfev: int) -> scipy.optimize.OptimizeResult:
+        resid = _Residuals(simulator, x, pool, substeps)
+        return scipy.optimize.least_squares(
             resid,
-            theta0,
+            theta,
             jac=resid.jacobian,
             bounds=(lower, np.inf),
-            x_scale=np.maximum(np.abs(theta0), 1e-3),
-            max_nfev=40,
+            x_scale=np.maximum(np.abs(theta), 1e-3),
+            max_nfev=max_nfev,
             xtol=1e-10,
             ftol=1e-10,
         )
 
+    try:
+        refined = refine(theta0, SEARCH_SUBSTEPS, 40)
+        # Then a few iterations with the step the fitted joint needs (stiff hysteresis: more).
+        fitted = NozzleParameters.from_normalized(*refined.x, A=1.0)
+        substeps = min(recommended_substeps(fitted, dt, amplitude), MAX_FIT_SUBSTEPS)
+        if substeps > SEARCH_SUBSTEPS:
+            refined = refine(refined.x, substeps, 6)
+
         def linear_theta(th: np.ndarray) -> np.ndarray:
             return np.array([th[0], th[1], th[2], 0.0, 0.0, 0.0, 1.0])
 
-        lin_resid = _Residuals(simulator, x, pool)
+        lin_resid = _Residuals(simulator, x, pool, max(substeps, SEARCH_SUBSTEPS))
         lin = scipy.optimize.least_squares(
             lambda th: lin_resid(linear_theta(th)),
             np.array([j0, max(b0, 0.0), k0]),
@@ -343,11 +353,11 @@ def fit_bouc_wen(
         if pool is not None:
             pool.close()
             pool.join()
-    return _assess(refined, lin, x, normalization_A, start, search, wf)
+    return _assess(refined, lin, x, normalization_A, start, search, wf, substeps)
 
 
 def _assess(
-    refined, lin, x: np.ndarray, normalization_A: float, start: float, search, wf: float
+    refined, lin, x: np.ndarray, normalization_A: float, start: float, search, wf: float, substeps: int
 ) -> BoucWenFit:
     """Decide whether the data determine the hysteresis, and package the fit."""
     linear = NozzleParameters.linear(*(float(v) for v in lin.x))
@@ -399,5 +409,10 @@ def _assess(
         reason=reason,
         normalization_A=normalization_A,
         seconds=time.perf_counter() - start,
-        details={"search_cost": float(search.fun), "search_generations": int(search.nit), "filter_rad_s": wf},
+        details={
+            "search_cost": float(search.fun),
+            "search_generations": int(search.nit),
+            "filter_rad_s": wf,
+            "substeps": substeps,
+        },
     )

@@ -131,6 +131,12 @@ def published_nozzle(which: str = "bouc_wen") -> NozzleParameters:
     return NozzleParameters(**table[which])
 
 
+def identified_nozzle() -> NozzleModel:
+    """The packaged nozzle model identified from the embedded bench test on Table 1's nozzle."""
+    path = _DATA.joinpath("nozzle_identified.json")
+    return NozzleModel.from_dict(json.loads(path.read_text()), source=path.name)
+
+
 class NozzleCore:
     """N nozzles integrated together by RK4 with the torque held over each sample.
 
@@ -412,3 +418,27 @@ class NozzleModel:
         except (json.JSONDecodeError, UnicodeDecodeError) as exc:
             raise ValueError(f"{path}: not valid JSON ({exc})") from None
         return cls.from_dict(data, source=str(path))
+
+
+def recommended_substeps(
+    params: NozzleParameters, dt: float, amplitude: float, step_rate: float = 0.2
+) -> int:
+    """RK4 substeps per sample so that ``h * rate <= step_rate`` for a motion of ``amplitude`` rad.
+
+    ``rate`` is the faster of the joint's natural frequency ``omega_n`` and, once the joint
+    yields, the hysteresis variable's own rate ``omega_n * amplitude * n / w_max`` with
+    ``w_max = (beta_n + gamma_n)^(-1/n)``: large beta + gamma make the z equation stiff. The
+    default 0.2 keeps the angle within about 2e-4 of a fine reference for Table 1's nozzle and
+    for a strongly hysteretic one (experiments/results/nozzle_integration_accuracy.md); the
+    sign switch of the Bouc-Wen law at velocity reversals limits RK4 to about second order.
+    """
+    if not (amplitude > 0 and step_rate > 0 and dt > 0):
+        raise ValueError("dt, amplitude and step_rate must be positive")
+    norm = params.normalized()
+    omega = float(np.sqrt((norm["k_el"] + norm["k_hys"]) / norm["J"]))
+    rate = omega
+    load = norm["beta_n"] + norm["gamma_n"]
+    if norm["k_hys"] > 0 and load > 0:
+        w_max = load ** (-1.0 / norm["n"])
+        rate = max(rate, omega * amplitude * norm["n"] / w_max)
+    return max(1, int(np.ceil(dt * rate / step_rate)))
