@@ -38,8 +38,10 @@ from ssme_envs.models.nozzle import NozzleParameters, recommended_substeps, simu
 
 NORMALIZED_NAMES = ("J", "b", "k_el", "k_hys", "beta_n", "gamma_n", "n")
 DEFAULT_NORMALIZATION_A = 0.35
-SEARCH_SUBSTEPS = 2  # RK4 steps per sample for the first refinement (1e-3 relative error at 0.008 s)
-MAX_FIT_SUBSTEPS = 8  # cap of the final refinement's substeps (recommended_substeps otherwise)
+# RK4 substeps: the first refinement uses a coarse step (h * rate <= 0.5, stable, about 1e-3
+# relative error), the last iterations the accurate one (h * rate <= 0.2), capped for time.
+COARSE_STEP_RATE = 0.5
+MAX_FIT_SUBSTEPS = 8
 _UPSAMPLE = 2  # path increments per sample when integrating w along the measured angle
 SEARCH_SAMPLES = 2000  # the global search looks at the first 16 s; the refinement at all of it
 
@@ -83,16 +85,16 @@ class BoucWenFit:
 
 
 def check_torque_record(
-    tau: np.ndarray, x: np.ndarray, min_samples: int = 200
+    tau: np.ndarray, x: np.ndarray, min_samples: int = 200, names: tuple[str, str] = ("torque", "angle")
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Validate a torque -> angle record; returns 1-D float arrays."""
+    """Validate a torque -> angle record (``names`` for the messages); returns 1-D float arrays."""
     tau = np.asarray(tau, dtype=float)
     x = np.asarray(x, dtype=float)
     if tau.ndim != 1 or x.ndim != 1:
         raise ValueError("torque and angle must be 1-D sequences")
     if tau.size != x.size:
-        raise ValueError(f"torque has {tau.size} samples but angle has {x.size}")
-    for arr, name in ((tau, "torque"), (x, "angle")):
+        raise ValueError(f"{names[0]} has {tau.size} samples but {names[1]} has {x.size}")
+    for arr, name in ((tau, names[0]), (x, names[1])):
         bad = ~np.isfinite(arr)
         if bad.any():
             raise ValueError(
@@ -101,12 +103,12 @@ def check_torque_record(
     if tau.size < min_samples:
         raise ValueError(f"the record has {tau.size} samples; a nozzle fit needs at least {min_samples}")
     if np.ptp(tau) <= 1e-12 * max(1.0, float(np.max(np.abs(tau)))):
-        raise ValueError("torque is constant: it does not excite the nozzle")
+        raise ValueError(f"{names[0]} is constant: it does not excite the nozzle")
     if np.ptp(x) <= 1e-12 * max(1.0, float(np.max(np.abs(x)))):
-        raise ValueError("angle is constant: the nozzle does not respond")
+        raise ValueError(f"{names[1]} is constant: the nozzle does not respond")
     changes = np.count_nonzero(np.diff(tau))
     if changes < 10:
-        raise ValueError(f"torque changes only {changes} times: not exciting enough to fit dynamics")
+        raise ValueError(f"{names[0]} changes only {changes} times: not exciting enough to fit dynamics")
     return tau, x
 
 
@@ -329,18 +331,24 @@ def fit_bouc_wen(
             ftol=1e-10,
         )
 
+    def substeps_for(theta: np.ndarray, step_rate: float) -> int:
+        joint = NozzleParameters.from_normalized(*theta, A=1.0)
+        return min(recommended_substeps(joint, dt, amplitude, step_rate), MAX_FIT_SUBSTEPS)
+
     try:
-        refined = refine(theta0, SEARCH_SUBSTEPS, 40)
+        coarse = substeps_for(theta0, COARSE_STEP_RATE)
+        if not np.all(np.isfinite(simulator(theta0, coarse))):
+            raise ValueError("the global search found no model that stays bounded on this record")
+        refined = refine(theta0, coarse, 40)
         # Then a few iterations with the step the fitted joint needs (stiff hysteresis: more).
-        fitted = NozzleParameters.from_normalized(*refined.x, A=1.0)
-        substeps = min(recommended_substeps(fitted, dt, amplitude), MAX_FIT_SUBSTEPS)
-        if substeps > SEARCH_SUBSTEPS:
+        substeps = substeps_for(refined.x, 0.2)
+        if substeps > coarse:
             refined = refine(refined.x, substeps, 6)
 
         def linear_theta(th: np.ndarray) -> np.ndarray:
             return np.array([th[0], th[1], th[2], 0.0, 0.0, 0.0, 1.0])
 
-        lin_resid = _Residuals(simulator, x, pool, max(substeps, SEARCH_SUBSTEPS))
+        lin_resid = _Residuals(simulator, x, pool, max(substeps, coarse))
         lin = scipy.optimize.least_squares(
             lambda th: lin_resid(linear_theta(th)),
             np.array([j0, max(b0, 0.0), k0]),

@@ -17,7 +17,12 @@ from pathlib import Path
 import numpy as np
 import scipy.signal
 
-from ssme_envs.identification.bouc_wen import DEFAULT_NORMALIZATION_A, BoucWenFit, fit_bouc_wen
+from ssme_envs.identification.bouc_wen import (
+    DEFAULT_NORMALIZATION_A,
+    BoucWenFit,
+    check_torque_record,
+    fit_bouc_wen,
+)
 from ssme_envs.identification.records import read_columns, write_columns
 from ssme_envs.identification.subspace import InnovationsModel, SubspaceResult, dsr_e, second_order_parameters
 from ssme_envs.models.nozzle import (
@@ -151,6 +156,7 @@ def identify_nozzle(
     normalization_A: float = DEFAULT_NORMALIZATION_A,
 ) -> NozzleIdentification:
     """DSR_e linear model (order 2 by default, as in the paper) and the Bouc-Wen joint fit."""
+    check_torque_record(record.tau, record.beta, names=(record.input_name, record.output_name))
     subspace = dsr_e(record.tau, record.beta, record.dt, order=order)
     linear = subspace.model
     tf = second_order_parameters(linear) if linear.n_states == 2 else {}
