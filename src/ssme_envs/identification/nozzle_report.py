@@ -120,7 +120,8 @@ def plot_prediction(
     return {label: fit_percent(record.beta, pred) for label, pred in preds.items()}
 
 
-def _row(name: str, p: NozzleParameters | None) -> str:
+def parameter_row(name: str, p: NozzleParameters | None) -> str:
+    """One markdown table row: J, b, k, a, A, beta, gamma, n ("-" for a linear joint)."""
     if p is None:
         return f"| {name} | not determined | | | | | | | |"
     if p.is_linear:
@@ -162,14 +163,16 @@ def write_nozzle_report(
         "",
         "| model | J | b | k | a | A | beta | gamma | n |",
         "|---|---|---|---|---|---|---|---|---|",
-        _row("paper, linear row (Table 1)", published_nozzle("linear")),
-        _row("identified linear (DSR_e, eq 5 form)", NozzleParameters.linear(lin["J"], lin["b"], lin["k"])),
-        _row("paper, nonlinear row (Table 1)", published_nozzle("bouc_wen")),
+        parameter_row("paper, linear row (Table 1)", published_nozzle("linear")),
+        parameter_row(
+            "identified linear (DSR_e, eq 5 form)", NozzleParameters.linear(lin["J"], lin["b"], lin["k"])
+        ),
+        parameter_row("paper, nonlinear row (Table 1)", published_nozzle("bouc_wen")),
     ]
     if truth is not None:
-        lines.append(_row("truth of this bench", truth))
+        lines.append(parameter_row("truth of this bench", truth))
     lines += [
-        _row(f"identified Bouc-Wen (normalization A = {bw.normalization_A:g})", bw.params),
+        parameter_row(f"identified Bouc-Wen (normalization A = {bw.normalization_A:g})", bw.params),
         "",
         f"Bouc-Wen fit: {bw.reason}. Simulation fit {bw.fit_percent:.2f} % (a linear joint fitted the same "
         f"way: {bw.linear_fit_percent:.2f} %).",
