@@ -19,7 +19,7 @@ from ssme_envs.identification.nozzle_pipeline import (
     validation_experiment,
 )
 from ssme_envs.identification.nozzle_report import parameter_row
-from ssme_envs.models.nozzle import published_nozzle
+from ssme_envs.models.nozzle import NozzleParameters, published_nozzle
 
 OUT = Path(__file__).resolve().parent / "results" / "nozzle_identification_study.md"
 
@@ -69,7 +69,10 @@ def main() -> None:
             "|---|---|---|---|---|---|---|---|---|",
             parameter_row("paper linear row", published_nozzle("linear")),
             f"| identified linear (DSR_e) | {lin['J']:.3f} | {lin['b']:.2f} | {lin['k']:.5g} | | | | | |",
-            parameter_row("truth", truth),
+            parameter_row(
+                f"truth (A = {bw.normalization_A:g})",
+                NozzleParameters.from_normalized(**truth.normalized(), A=bw.normalization_A),
+            ),
             parameter_row(f"identified Bouc-Wen (A = {bw.normalization_A:g})", bw.params),
             "",
             f"Verdict: {bw.reason}.",

@@ -213,3 +213,45 @@ def test_identified_model_simulates_like_truth_through_simulate():
     v = step_ramp_test_signal()
     _, a = simulate(result.model, v, TruthConfig.ideal())
     np.testing.assert_allclose(a, _truth_response(truth, v), atol=1e-10)
+
+
+def test_single_output_model_identifies_and_validates():
+    truth = published_model(100)
+    u = prbs(1016)
+    y = _truth_response(truth, u)[:, :1]
+    result = identify(u, y, 0.04, asymmetric=False, output_names=["pc"])
+    assert result.model.n_outputs == 1
+    figures = __import__("ssme_envs.identification", fromlist=["validate"]).validate(result.model, u, y)
+    assert len(figures["model"]["see"]) == 1
+
+
+def test_lambda_needs_as_many_outputs_as_prbs_inputs():
+    truth = published_model(100)
+    u = prbs(1016)
+    y = _truth_response(truth, u)[:, :1]
+    with pytest.raises(ValueError, match="cannot be separated"):
+        identify(u, y, 0.04)
+
+
+def test_two_level_input_of_unequal_magnitude_is_named(record):
+    u, y = record
+    u = u.copy()
+    u[:, 1] += 0.002
+    with pytest.raises(ValueError, match="input 'u1' switches between two levels of different magnitude"):
+        identify(u, y, 0.04)
+
+
+def test_iv_pass_never_makes_the_fit_worse():
+    truth = published_model(90)
+    rng = np.random.default_rng(4)
+    u = prbs(600)
+    clean = _truth_response(truth, u)
+    y = clean + 0.2 * clean.std(axis=0) * rng.standard_normal(clean.shape)
+    ls = identify(u, y, 0.04, method="ls", indices=(4, 4))
+    iv = identify(u, y, 0.04, method="iv", indices=(4, 4))
+
+    def sim_error(model):
+        return np.sum((y - dlsim(model.A, model.B, model.C, eq36(u, model.lam))) ** 2)
+
+    assert iv.model.spectral_radius() < 1
+    assert sim_error(iv.model) <= sim_error(ls.model) * (1 + 1e-12)

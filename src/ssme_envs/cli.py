@@ -95,7 +95,6 @@ def build_parser() -> argparse.ArgumentParser:
     nozzle.add_argument("--output", default="beta", help="angle column, rad (default: %(default)s)")
     nozzle.add_argument("--dt", type=float, help="sample time in s, if the CSV has no 't' column")
     nozzle.add_argument("--validate", type=Path, help="a second CSV record to validate on")
-    nozzle.add_argument("--order", default="2", help="DSR_e model order, or 'auto' (default: %(default)s)")
     nozzle.add_argument("--workers", type=int, default=2, help="processes for the fit (default: %(default)s)")
     nozzle.add_argument("--seed", type=int, default=None, help="seed of the bench test and of the search")
     nozzle.add_argument(
@@ -195,17 +194,10 @@ def _identify_nozzle(args: argparse.Namespace) -> int:
     from ssme_envs.identification.nozzle_report import write_nozzle_report
     from ssme_envs.models.nozzle import published_nozzle
 
-    if args.order == "auto":
-        order = None
-    else:
-        try:
-            order = int(args.order)
-        except ValueError:
-            raise _UsageError(f"--order must be a positive integer or 'auto', got {args.order!r}") from None
-        if order < 1:
-            raise _UsageError(f"--order must be a positive integer or 'auto', got {args.order!r}")
     if args.workers < 1:
         raise _UsageError(f"--workers must be at least 1, got {args.workers}")
+    if not args.normalization_a > 0:
+        raise _UsageError(f"--normalization-a must be positive, got {args.normalization_a}")
     seed = npipe.DEFAULT_SEED if args.seed is None else args.seed
     truth = None
     start = time.perf_counter()
@@ -215,7 +207,8 @@ def _identify_nozzle(args: argparse.Namespace) -> int:
                 raise _UsageError(f"--{flag} needs --data (the embedded bench test sets its own)")
         truth = published_nozzle("bouc_wen")
         print("simulating the bench test (2.5 kHz, 59.8 s, decimated to 0.008 s) and identifying ...")
-        ident, records = npipe.run_default(seed, args.workers, order, args.normalization_a)
+        _make_dir(args.out)
+        ident, records = npipe.run_default(seed, args.workers, args.normalization_a)
         note = (
             "Bench data simulated from the paper's Table 1 Bouc-Wen nozzle (the truth of this report): "
             "a PRBS torque keeping the angle within +-3 deg, 2.5 kHz acquisition with sensor noise (std "
@@ -229,17 +222,13 @@ def _identify_nozzle(args: argparse.Namespace) -> int:
                 raise ValueError(f"{args.validate}: sample time {check.dt:g} s differs from the data's")
             records["validation"] = check
         note = f"Data: {args.data}."
+        _make_dir(args.out)
         print("identifying: DSR_e linear model, then the Bouc-Wen joint (evolutionary search, least squares)")
         ident = npipe.identify_nozzle(
-            records["identification"],
-            seed=seed,
-            workers=args.workers,
-            order=order,
-            normalization_A=args.normalization_a,
+            records["identification"], seed=seed, workers=args.workers, normalization_A=args.normalization_a
         )
         if "validation" in records:
             ident.model.fit["validation_record"] = npipe.validate_nozzle(ident.model, records["validation"])
-    _make_dir(args.out)
     ident.model.save(args.out / "model.json")
     if args.data is None:
         (args.out / "data").mkdir(exist_ok=True)

@@ -43,7 +43,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.linalg
 
-from ssme_envs.models.statespace import AlphaCanonicalModel, AlphaStructure, asymmetric_gain
+from ssme_envs.models.engine import TruthConfig, simulate
+from ssme_envs.models.statespace import AlphaCanonicalModel, AlphaStructure
 
 DEFAULT_MAX_INDEX = 6
 DEFAULT_RANK_TOL = 0.1
@@ -125,14 +126,30 @@ def check_record(
     return u, y
 
 
-def _binary_amplitudes(u: np.ndarray) -> np.ndarray:
-    """Per input: the constant |u| of a binary (PRBS-like) input, or NaN if |u| varies."""
+def _binary_amplitudes(u: np.ndarray, names: Sequence[str] | None = None) -> np.ndarray:
+    """Per input: the constant |u| of a symmetric binary (PRBS-like) input, or NaN if |u| varies.
+
+    Raises
+    ------
+    ValueError
+        For an input that switches between two levels of different magnitude: its |u| is an
+        affine function of u, so lambda cannot be told apart from B and an offset.
+    """
     mag = np.abs(u)
     out = np.full(u.shape[1], np.nan)
     for j in range(u.shape[1]):
         top = mag[:, j].max()
         if top > 0 and mag[:, j].min() >= top * (1 - 1e-9):
             out[j] = mag[:, j].mean()
+            continue
+        levels = np.unique(u[:, j])
+        if levels.size == 2:
+            name = names[j] if names is not None else f"u{j}"
+            raise ValueError(
+                f"input '{name}' switches between two levels of different magnitude ({levels[0]:g}, "
+                f"{levels[1]:g}): lambda cannot be identified from it; use a PRBS symmetric about 0, or "
+                "identify without the asymmetric gains (--symmetric)"
+            )
     return out
 
 
@@ -179,20 +196,22 @@ def estimate_indices(
     horizon, p = y.shape
     names = _names(output_names, p, "y")
     window = max_index
-    feats = _input_features(u, _binary_amplitudes(u), asymmetric)
+    gamma = _binary_amplitudes(u) if asymmetric else np.full(u.shape[1], np.nan)
+    n_feat = u.shape[1] + int(np.isnan(gamma).sum() if asymmetric else 0)
     start = 2 * window
+    needed = (window * n_feat + 1) + window * n_feat + window * p
+    if horizon - start < 2 * needed:
+        raise ValueError(
+            f"the record has {horizon} samples; a structure search up to index {max_index} needs at "
+            f"least {start + 2 * needed} (use a longer record or a smaller max_index)"
+        )
+    feats = _input_features(u, gamma, asymmetric)
     lags = range(1, window + 1)
     r_block = np.hstack([_lags(feats, lags, start), np.ones((horizon - start, 1))])
     z_block = _lags(feats, range(window + 1, 2 * window + 1), start)
     # Column (k, i) of q_block is y_i(t - L + k), which carries the row c_i A^k.
     q_block = _lags(y, range(window, 0, -1), start)
     n_r, n_z = r_block.shape[1], z_block.shape[1]
-    needed = n_r + n_z + q_block.shape[1]
-    if horizon - start < 2 * needed:
-        raise ValueError(
-            f"the record has {horizon} samples; a structure search up to index {max_index} needs at "
-            f"least {start + 2 * needed} (use a longer record or a smaller max_index)"
-        )
     tri = scipy.linalg.qr(np.hstack([r_block, z_block, q_block]), mode="r", check_finite=False)[0]
     diag = np.abs(np.diag(tri)[: n_r + n_z])
     if diag.min() < 1e-9 * diag.max():
@@ -244,13 +263,12 @@ def _regressors(
     return np.column_stack([*y_cols, u_cols, np.ones(y.shape[0] - start)])
 
 
-def _simulate_linear(a: np.ndarray, b: np.ndarray, c: np.ndarray, u: np.ndarray) -> np.ndarray:
-    x = np.zeros(a.shape[0])
-    out = np.empty((u.shape[0], c.shape[0]))
-    for k in range(u.shape[0]):
-        out[k] = c @ x
-        x = a @ x + b @ u[k]
-    return out
+def _simulation_error(model: AlphaCanonicalModel, u: np.ndarray, y: np.ndarray) -> float:
+    """Sum of squared simulation errors (eqs 51-52); inf for an unstable or non-finite model."""
+    if not np.all(np.isfinite(model.A)) or model.spectral_radius() >= 1.0:
+        return float("inf")
+    err = y - simulate(model, u, TruthConfig.ideal())[1]
+    return float(np.sum(err**2))
 
 
 def identify(
@@ -304,7 +322,7 @@ def identify(
     if structure.n_outputs != p:
         raise ValueError(f"{len(structure.indices)} observability indices given for {p} outputs")
 
-    gamma = _binary_amplitudes(u) if asymmetric else np.full(m, np.nan)
+    gamma = _binary_amplitudes(u, in_names) if asymmetric else np.full(m, np.nan)
     feats = _input_features(u, gamma, asymmetric)
     n_feat = feats.shape[1]
     start = max(structure.indices)
@@ -325,28 +343,43 @@ def identify(
                 f"{phi.shape[1]}): the record does not determine indices {list(structure.indices)}"
             )
         thetas.append(theta)
-    model_parts = _realize(structure, thetas, m, gamma, asymmetric)
+
+    def build(parts: tuple) -> AlphaCanonicalModel:
+        a, b, c, lam, _ = parts
+        return AlphaCanonicalModel(
+            A=a,
+            B=b,
+            C=c,
+            dt=dt,
+            observability_indices=structure.indices,
+            lam=lam,
+            input_names=in_names,
+            output_names=out_names,
+            fit={"method": method, "samples": int(u.shape[0])},
+        )
+
+    parts = _realize(structure, thetas, m, gamma, asymmetric, out_names)
+    model = build(parts)
     if method == "iv":
+        # Each pass takes the previous model's simulated output as instruments; a pass is kept
+        # only if its model is stable and simulates the record at least as well (weak
+        # instruments can otherwise throw the estimate away from the least-squares one).
+        best = _simulation_error(model, u, y)
         for _ in range(2):
-            a, b, c, lam, _ = model_parts
-            simulated = _simulate_linear(a, b, c, asymmetric_gain(u, lam))
+            simulated = simulate(model, u, TruthConfig.ideal())[1]
             thetas = []
             for i, phi in enumerate(phis):
                 instruments = _regressors(structure, i, simulated, feats, start)
-                thetas.append(np.linalg.solve(instruments.T @ phi, instruments.T @ y[start:, i]))
-            model_parts = _realize(structure, thetas, m, gamma, asymmetric)
-    a, b, c, lam, intercept = model_parts
-    model = AlphaCanonicalModel(
-        A=a,
-        B=b,
-        C=c,
-        dt=dt,
-        observability_indices=structure.indices,
-        lam=lam,
-        input_names=in_names,
-        output_names=out_names,
-        fit={"method": method, "samples": int(u.shape[0])},
-    )
+                thetas.append(
+                    np.linalg.lstsq(instruments.T @ phi, instruments.T @ y[start:, i], rcond=None)[0]
+                )
+            candidate_parts = _realize(structure, thetas, m, gamma, asymmetric, out_names)
+            candidate = build(candidate_parts)
+            error = _simulation_error(candidate, u, y)
+            if not error <= best:
+                break
+            parts, model, best = candidate_parts, candidate, error
+    intercept = parts[4]
     return Identification(model, search, intercept, method)
 
 
@@ -356,6 +389,7 @@ def _realize(
     m: int,
     gamma: np.ndarray,
     asymmetric: bool,
+    output_names: Sequence[str],
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(A, B, C, lambda, unexplained intercept) from the per-output regression coefficients."""
     n, p = structure.n_states, structure.n_outputs
@@ -388,7 +422,13 @@ def _realize(
             for i in range(p):
                 for d in range(structure.indices[i]):
                     theta_u_bar[i] += b[structure.position(i, d)]
-            offsets, *_ = np.linalg.lstsq(theta_u_bar[:, binary], intercept, rcond=None)
+            offsets, _, rank, _ = np.linalg.lstsq(theta_u_bar[:, binary], intercept, rcond=None)
+            if rank < binary.size:
+                raise ValueError(
+                    f"the {binary.size} PRBS inputs' gains lambda cannot be separated with the outputs "
+                    f"{', '.join(output_names)} (eq 42 needs as many independent outputs as PRBS inputs); "
+                    "identify without the asymmetric gains (--symmetric)"
+                )
             lam[binary] = 1.0 + offsets / gamma[binary]
             intercept = intercept - theta_u_bar[:, binary] @ offsets
     return a, b, c, lam, intercept

@@ -11,15 +11,19 @@ normalization of ``A`` (default 0.35, Table 1's value, so that numbers compare w
    follows from the measured angle path alone (``dw = dx (1 - |w|^n (...))`` is rate
    independent), and J, b, k_el, k_hys enter linearly: they come from a least-squares fit of
    the equation of motion after a state-variable filter ``(wf / (s + wf))^3`` (no numerical
-   differentiation of noisy data). The population is evaluated as one array operation, split
-   over ``workers`` processes.
+   differentiation of noisy data). The population is evaluated as one array operation.
 2. **Refinement** of all seven parameters by :func:`scipy.optimize.least_squares` on the
-   simulation (output) error over the whole record, with the RK4 nozzle core.
+   simulation (output) error over the whole record, with the RK4 nozzle core: first with a
+   coarse step, then a few iterations with the step :func:`recommended_substeps` asks for. The
+   Jacobian's columns are simulated in ``workers`` processes.
 3. **Identifiability**: a linear joint (J, b, k) is fitted the same way. The hysteresis counts
-   as determined only if it lowers the residual significantly (F-test, p < 1e-3) and the
-   standard errors from the Jacobian leave ``k_hys``, ``n`` and the loading and unloading
-   coefficients known to better than 50 %. Otherwise the fit says so and returns no Bouc-Wen
-   parameters, rather than numbers the data do not support.
+   as determined only if the Bouc-Wen model describes the record (fit >= 80 %), lowers the
+   residual significantly (F-test, p < 1e-3), and the standard errors from the Jacobian leave
+   ``k_hys``, ``n`` and the loading and unloading coefficients known to better than 50 %.
+   Otherwise the fit says so and returns no Bouc-Wen parameters, rather than numbers the data
+   do not support.
+
+The record must start at rest at the zero of the angle (deviations from the rest position).
 """
 
 from __future__ import annotations
@@ -34,6 +38,8 @@ import scipy.optimize
 import scipy.signal
 import scipy.stats
 
+from ssme_envs.identification.alpha_canonical import check_record
+from ssme_envs.identification.metrics import fit_percent
 from ssme_envs.models.nozzle import NozzleParameters, recommended_substeps, simulate_nozzle
 
 NORMALIZED_NAMES = ("J", "b", "k_el", "k_hys", "beta_n", "gamma_n", "n")
@@ -41,6 +47,7 @@ DEFAULT_NORMALIZATION_A = 0.35
 # RK4 substeps: the first refinement uses a coarse step (h * rate <= 0.5, stable, about 1e-3
 # relative error), the last iterations the accurate one (h * rate <= 0.2), capped for time.
 COARSE_STEP_RATE = 0.5
+MIN_FIT_PERCENT = 80.0  # below this the model structure, not its parameters, is the problem
 MAX_FIT_SUBSTEPS = 8
 _UPSAMPLE = 2  # path increments per sample when integrating w along the measured angle
 SEARCH_SAMPLES = 2000  # the global search looks at the first 16 s; the refinement at all of it
@@ -87,28 +94,26 @@ class BoucWenFit:
 def check_torque_record(
     tau: np.ndarray, x: np.ndarray, min_samples: int = 200, names: tuple[str, str] = ("torque", "angle")
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Validate a torque -> angle record (``names`` for the messages); returns 1-D float arrays."""
-    tau = np.asarray(tau, dtype=float)
-    x = np.asarray(x, dtype=float)
+    """Validate a torque -> angle record (``names`` for the messages); returns 1-D float arrays.
+
+    Beyond :func:`check_record` (lengths, NaN/inf, constant signals): enough samples, enough
+    torque changes, and an angle that starts at rest at zero, as the simulated model does.
+    """
+    tau, x = np.asarray(tau, dtype=float), np.asarray(x, dtype=float)
     if tau.ndim != 1 or x.ndim != 1:
-        raise ValueError("torque and angle must be 1-D sequences")
-    if tau.size != x.size:
-        raise ValueError(f"{names[0]} has {tau.size} samples but {names[1]} has {x.size}")
-    for arr, name in ((tau, names[0]), (x, names[1])):
-        bad = ~np.isfinite(arr)
-        if bad.any():
-            raise ValueError(
-                f"{name} has NaN or inf at sample {int(np.argmax(bad))} ({int(bad.sum())} bad values)"
-            )
+        raise ValueError(f"{names[0]} and {names[1]} must be 1-D sequences")
+    u2, y2 = check_record(tau[:, None], x[:, None], names[:1], names[1:])
+    tau, x = u2[:, 0], y2[:, 0]
     if tau.size < min_samples:
         raise ValueError(f"the record has {tau.size} samples; a nozzle fit needs at least {min_samples}")
-    if np.ptp(tau) <= 1e-12 * max(1.0, float(np.max(np.abs(tau)))):
-        raise ValueError(f"{names[0]} is constant: it does not excite the nozzle")
-    if np.ptp(x) <= 1e-12 * max(1.0, float(np.max(np.abs(x)))):
-        raise ValueError(f"{names[1]} is constant: the nozzle does not respond")
     changes = np.count_nonzero(np.diff(tau))
     if changes < 10:
         raise ValueError(f"{names[0]} changes only {changes} times: not exciting enough to fit dynamics")
+    if abs(x[0]) > 0.05 * np.ptp(x):
+        raise ValueError(
+            f"{names[1]} starts at {x[0]:.4g}, not at rest at zero: give it as the deviation from the "
+            "rest position (the model starts from rest)"
+        )
     return tau, x
 
 
@@ -236,12 +241,6 @@ def _make_pool(workers: int, simulator: _Simulator):
     return context.Pool(workers, initializer=_init_worker, initargs=(simulator,))
 
 
-def _nrmse_fit(measured: np.ndarray, predicted: np.ndarray) -> float:
-    return float(
-        100.0 * (1.0 - np.linalg.norm(measured - predicted) / np.linalg.norm(measured - measured.mean()))
-    )
-
-
 def fit_bouc_wen(
     tau: np.ndarray,
     x: np.ndarray,
@@ -288,7 +287,8 @@ def fit_bouc_wen(
     j0, b0, k0 = probe.linear_part(None, 0.0)
     if not (j0 > 0 and k0 > 0):
         raise ValueError("the record does not show a mass-spring response (fitted inertia or stiffness <= 0)")
-    wf = float(np.clip(2.0 * np.sqrt(k0 / j0), 5.0 / (x.size * dt), 0.5 * np.pi / dt))
+    seg_seconds = (seg.stop - seg.start) * dt
+    wf = float(np.clip(2.0 * np.sqrt(k0 / j0), 40.0 / seg_seconds, 0.5 * np.pi / dt))
     eq = _EquationError(tau[seg], x[seg], dt, wf)
 
     def population_cost(z: np.ndarray) -> np.ndarray:
@@ -344,11 +344,12 @@ def fit_bouc_wen(
         substeps = substeps_for(refined.x, 0.2)
         if substeps > coarse:
             refined = refine(refined.x, substeps, 6)
+        substeps = max(substeps, coarse)
 
         def linear_theta(th: np.ndarray) -> np.ndarray:
             return np.array([th[0], th[1], th[2], 0.0, 0.0, 0.0, 1.0])
 
-        lin_resid = _Residuals(simulator, x, pool, max(substeps, coarse))
+        lin_resid = _Residuals(simulator, x, pool, substeps)
         lin = scipy.optimize.least_squares(
             lambda th: lin_resid(linear_theta(th)),
             np.array([j0, max(b0, 0.0), k0]),
@@ -388,7 +389,14 @@ def _assess(
         "beta_n, gamma_n (over beta_n + gamma_n)": float(max(std[4], std[5]) / load) if load > 0 else np.inf,
     }
     loose = {k: v for k, v in checks.items() if not v < 0.5}
-    if p_value >= 1e-3:
+    fit = float(fit_percent(x, x + refined.fun))
+    if not fit >= MIN_FIT_PERCENT:
+        reason = (
+            f"the Bouc-Wen model does not describe the record (simulation fit {fit:.1f} % < "
+            f"{MIN_FIT_PERCENT:g} %): its parameters are not determined; check that the record is a "
+            "torque -> angle test starting at rest"
+        )
+    elif p_value >= 1e-3:
         reason = (
             "the hysteresis parameters are not determined by the data: the Bouc-Wen model fits no better "
             f"than a linear joint (F-test p = {p_value:.2g}); the record likely stays in the linear range"
@@ -404,7 +412,7 @@ def _assess(
             f"hysteresis determined (F-test p = {p_value:.2g}, "
             f"largest relative standard error {max(checks.values()):.2g})"
         )
-    determined = p_value < 1e-3 and not loose
+    determined = fit >= MIN_FIT_PERCENT and p_value < 1e-3 and not loose
     return BoucWenFit(
         determined=determined,
         params=NozzleParameters.from_normalized(**normalized, A=normalization_A) if determined else None,
@@ -412,8 +420,8 @@ def _assess(
         normalized=normalized,
         relative_std=relative_std,
         p_value=p_value,
-        fit_percent=_nrmse_fit(x, x + refined.fun),
-        linear_fit_percent=_nrmse_fit(x, x + lin.fun),
+        fit_percent=fit,
+        linear_fit_percent=float(fit_percent(x, x + lin.fun)),
         reason=reason,
         normalization_A=normalization_A,
         seconds=time.perf_counter() - start,
@@ -421,6 +429,6 @@ def _assess(
             "search_cost": float(search.fun),
             "search_generations": int(search.nit),
             "filter_rad_s": wf,
-            "substeps": substeps,
+            "substeps": substeps,  # of the final refinement
         },
     )

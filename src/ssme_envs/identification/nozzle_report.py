@@ -7,10 +7,16 @@ from pathlib import Path
 import numpy as np
 import scipy.signal
 
-from ssme_envs.identification.nozzle_pipeline import NozzleIdentification, NozzleRecord, fit_percent
+from ssme_envs.identification.metrics import fit_percent
+from ssme_envs.identification.nozzle_pipeline import (
+    NozzleIdentification,
+    NozzleRecord,
+    simulate_joint,
+    simulate_linear_model,
+)
 from ssme_envs.identification.report import agg_pyplot
 from ssme_envs.identification.subspace import to_continuous
-from ssme_envs.models.nozzle import NozzleCore, NozzleParameters, published_nozzle, simulate_nozzle
+from ssme_envs.models.nozzle import NozzleCore, NozzleParameters, published_nozzle
 
 # Eq 5 of the paper: G_m(s) = 0.03971 / (s^2 + 14.95 s + 5694), for the frequency-response figure.
 PAPER_TF = ([0.03971], [1.0, 14.95, 5694.0])
@@ -42,10 +48,9 @@ def plot_frequency_response(path: Path, ident: NozzleIdentification) -> None:
 
 
 def _predictions(ident: NozzleIdentification, record: NozzleRecord) -> dict[str, np.ndarray]:
-    lin = ident.subspace.model.simulate(record.tau[:, None])[:, 0]
-    out = {"linear (DSR_e)": lin}
+    out = {"linear (DSR_e)": simulate_linear_model(ident.model, record)}
     if ident.model.bouc_wen is not None:
-        out["Bouc-Wen"] = simulate_nozzle(ident.model.bouc_wen, record.tau, record.dt, torque_limit=np.inf)
+        out["Bouc-Wen"] = simulate_joint(ident.model.bouc_wen, record)
     return out
 
 
@@ -96,11 +101,10 @@ def plot_hysteresis(
 
 
 def plot_prediction(
-    path: Path, ident: NozzleIdentification, record: NozzleRecord, title: str
+    path: Path, record: NozzleRecord, preds: dict[str, np.ndarray], title: str
 ) -> dict[str, float]:
     """Figure 12: measured angle against the models' simulated angles; returns their fit %."""
     plt = agg_pyplot()
-    preds = _predictions(ident, record)
     t = np.arange(record.tau.size) * record.dt
     fig, (ax, zoom) = plt.subplots(2, 1, figsize=(9, 5.5))
     stop = min(record.tau.size, int(1.0 / record.dt))
@@ -117,7 +121,7 @@ def plot_prediction(
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
-    return {label: fit_percent(record.beta, pred) for label, pred in preds.items()}
+    return {label: float(fit_percent(record.beta, pred)) for label, pred in preds.items()}
 
 
 def parameter_row(name: str, p: NozzleParameters | None) -> str:
@@ -153,7 +157,8 @@ def write_nozzle_report(
         f"Order {dsr['order']} (past horizon {dsr['past_horizon']}, future horizon {dsr['future_horizon']}), "
         f"simulation fit {dsr['fit_percent']:.1f} % on the identification record.",
         "",
-        f"G(s) = ({num[1]:.4g} s + {num[2]:.5g}) / (s^2 + {den[1]:.4g} s + {den[2]:.5g}); the paper's eq 5: "
+        f"G(s) = ({num[0]:.3g} s^2 + {num[1]:.4g} s + {num[2]:.5g}) / (s^2 + {den[1]:.4g} s + {den[2]:.5g}); "
+        "the paper's eq 5: "
         "0.03971 / (s^2 + 14.95 s + 5694).",
         "",
         f"Natural frequency {dsr['natural_frequency_hz']:.2f} Hz, damping ratio {dsr['damping_ratio']:.4f}, "
@@ -193,10 +198,13 @@ def write_nozzle_report(
     last = list(records)[-1]
     plot_hysteresis(out_dir / "hysteresis.png", ident, records[last])
     lines += [f"![hysteresis (figure 11), {last} record](hysteresis.png)", ""]
-    lines += ["| record | " + " | ".join(f"fit {k} %" for k in _predictions(ident, records[last])) + " |"]
-    lines += ["|---|" + "---|" * len(_predictions(ident, records[last]))]
+    predictions = {name: _predictions(ident, record) for name, record in records.items()}
+    labels = list(predictions[last])
+    lines += ["| record | " + " | ".join(f"fit {k} %" for k in labels) + " |", "|---|" + "---|" * len(labels)]
     for name, record in records.items():
-        fits = plot_prediction(out_dir / f"prediction_{name}.png", ident, record, f"{name} record")
+        fits = plot_prediction(
+            out_dir / f"prediction_{name}.png", record, predictions[name], f"{name} record"
+        )
         lines.append(f"| {name} | " + " | ".join(f"{v:.2f}" for v in fits.values()) + " |")
     lines.append("")
     lines += [f"![prediction, {name} (figure 12)](prediction_{name}.png)" for name in records]

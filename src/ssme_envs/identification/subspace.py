@@ -258,11 +258,21 @@ def _projected_future(
     return z
 
 
-def _select_order(singular_values: np.ndarray, max_order: int) -> int:
-    """Order at the largest drop in log10 of the normalized singular values (see dsr_e)."""
+def _select_order(singular_values: np.ndarray, max_order: int, noise_free: bool) -> int:
+    """Order at the largest drop in log10 of the normalized singular values (see dsr_e).
+
+    With noisy data every direction the past data span carries noise, so a drop to round-off
+    marks the rank limit of the horizons, not the system: such a drop is not a candidate.
+    """
     s = singular_values / singular_values[0]
     logs = np.log10(np.maximum(s, np.finfo(float).tiny))
-    candidates = [n for n in range(1, max_order + 1) if s[n - 1] > SINGULAR_VALUE_FLOOR]
+    candidates = [
+        n
+        for n in range(1, max_order + 1)
+        if s[n - 1] > SINGULAR_VALUE_FLOOR and (noise_free or s[n] > SINGULAR_VALUE_FLOOR)
+    ]
+    if not candidates:
+        raise ValueError("the singular values show no order: the record is too short for the horizons")
     gaps = [logs[n - 1] - logs[n] for n in candidates]
     return candidates[int(np.argmax(gaps))]
 
@@ -351,7 +361,7 @@ def _identify_once(
         )
     most = min(future * p, len(singular_values) - 1)
     if order is None:
-        order = _select_order(singular_values, min(max_order, most))
+        order = _select_order(singular_values, min(max_order, most), noise_free)
     elif order > most:
         raise ValueError(
             f"order={order} needs future_horizon >= {math.ceil(order / p)} and past_horizon >= "
@@ -402,7 +412,9 @@ def dsr_e(
     **Order selection.** The singular values ``s_1 >= s_2 >= ...`` of ``Z`` are normalized by
     ``s_1``; the order is the ``n`` in ``1..min(max_order, L p)`` with the largest drop
     ``log10 s_n - log10 s_(n+1)``, among the ``n`` whose ``s_n / s_1`` exceeds 1e-10 (below that
-    the values are round-off, and gaps between them mean nothing). Noise-free data show a drop
+    the values are round-off, and gaps between them mean nothing); with noisy data also
+    ``s_(n+1) / s_1`` must exceed 1e-10, since a drop to round-off is then the rank limit of the
+    horizons rather than the system's order. Noise-free data show a drop
     of ten decades or more at the true order; with noise the values beyond the order sit on a
     floor that falls as ``1 / sqrt(T)`` relative to ``s_1``. A weak, barely excited mode can
     have a smaller drop than a strong one: inspect ``singular_values`` and pass ``order=``.

@@ -78,22 +78,22 @@ class TruthConfig:
         Total backlash width of each valve linkage, normalized valve units (assumed 5e-4).
     stiction : float
         Stick band of each valve, normalized valve units (assumed 2e-4).
-    sensor_noise : tuple of float
-        Standard deviation of the white measurement noise on each output, normalized units
-        (assumed 1e-4 on Pc and MR, about 3 % of the response to a 0.01 PRBS).
+    sensor_noise : float or tuple of float
+        Standard deviation of the white measurement noise on each output (one value for all),
+        normalized units (assumed 1e-4 on Pc and MR, 1-2 % of the response to a 0.01 PRBS).
     """
 
     asymmetric_gains: bool = True
     backlash: float = 5e-4
     stiction: float = 2e-4
-    sensor_noise: tuple[float, ...] = (1e-4, 1e-4)
+    sensor_noise: float | tuple[float, ...] = (1e-4, 1e-4)
 
     def __post_init__(self) -> None:
         for name in ("backlash", "stiction"):
             value = getattr(self, name)
             if not (np.isfinite(value) and value >= 0):
                 raise ValueError(f"{name} must be a finite width >= 0, got {value!r}")
-        noise = np.asarray(self.sensor_noise, dtype=float)
+        noise = np.atleast_1d(np.asarray(self.sensor_noise, dtype=float))
         if noise.ndim != 1 or not np.all(np.isfinite(noise)) or np.any(noise < 0):
             raise ValueError(
                 f"sensor_noise must be finite standard deviations >= 0, got {self.sensor_noise!r}"
@@ -102,7 +102,7 @@ class TruthConfig:
     @classmethod
     def ideal(cls) -> TruthConfig:
         """The point model with its lambda only: no valve nonlinearity, no noise."""
-        return cls(backlash=0.0, stiction=0.0, sensor_noise=(0.0, 0.0))
+        return cls(backlash=0.0, stiction=0.0, sensor_noise=0.0)
 
 
 class EngineCore:
@@ -214,9 +214,11 @@ def simulate(
     if not np.all(np.isfinite(u)):
         raise ValueError("commands contain NaN or inf")
     n_runs, horizon, _ = u.shape
-    noise_std = np.asarray(config.sensor_noise, dtype=float)
+    noise_std = np.atleast_1d(np.asarray(config.sensor_noise, dtype=float))
+    if noise_std.size == 1:
+        noise_std = np.full(model.n_outputs, noise_std[0])
     if noise_std.shape != (model.n_outputs,):
-        raise ValueError(f"sensor_noise needs {model.n_outputs} values, got {noise_std.size}")
+        raise ValueError(f"sensor_noise needs 1 or {model.n_outputs} values, got {noise_std.size}")
     if np.any(noise_std > 0) and rng is None:
         raise ValueError("sensor noise is on: pass a seeded numpy Generator as rng")
     clean = np.empty((n_runs, horizon, model.n_outputs))

@@ -32,12 +32,12 @@ from typing import Any
 
 import numpy as np
 
-from ssme_envs.models.statespace import as_matrix, dumps_compact
+from ssme_envs.models.statespace import as_matrix, dumps_compact, read_json
 
 NOZZLE_DT = 0.008  # s, the paper's decimated sample time
 BENCH_RATE_HZ = 2500.0  # the bench acquisition rate
 DEFAULT_SUBSTEPS = 4  # RK4 steps per 0.008 s sample: 2 ms, about 1e-6 relative error (see tests)
-DEFAULT_TORQUE_LIMIT = 3.0e4  # N m, an assumption: twice what +-3 deg of static deflection needs
+DEFAULT_TORQUE_LIMIT = 3.0e4  # N m, an assumption: about 4x the 7.5e3 N m of a static 3 deg deflection
 
 _DATA = resources.files("ssme_envs") / "models" / "data"
 
@@ -395,10 +395,16 @@ class NozzleModel:
                 if missing:
                     raise ValueError(f"bouc_wen: missing key(s) {', '.join(missing)}")
                 bw = NozzleParameters(**bw)
+            fit = data.get("fit", {})
+            if not isinstance(fit, dict):
+                raise ValueError("fit must be an object")
+            for key in ("input_name", "output_name"):
+                if not isinstance(data.get(key, "x"), str):
+                    raise ValueError(f"{key} must be a string")
             return cls(
                 linear=data["linear"],
                 bouc_wen=bw,
-                fit=dict(data.get("fit", {})),
+                fit=dict(fit),
                 input_name=str(data.get("input_name", "tau")),
                 output_name=str(data.get("output_name", "beta")),
             )
@@ -410,14 +416,7 @@ class NozzleModel:
 
     @classmethod
     def load(cls, path: str | Path) -> NozzleModel:
-        path = Path(path)
-        try:
-            data = json.loads(path.read_text())
-        except FileNotFoundError:
-            raise ValueError(f"{path}: no such file") from None
-        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-            raise ValueError(f"{path}: not valid JSON ({exc})") from None
-        return cls.from_dict(data, source=str(path))
+        return cls.from_dict(read_json(path), source=str(path))
 
 
 def recommended_substeps(

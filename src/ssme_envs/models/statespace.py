@@ -263,38 +263,60 @@ class AlphaCanonicalModel:
         indices = data["observability_indices"]
         if not isinstance(indices, list) or not all(isinstance(v, int) for v in indices):
             raise ValueError(f"{source}: observability_indices must be a list of integers")
+        names = {}
+        for key, count, prefix in (("input_names", m, "u"), ("output_names", p, "y")):
+            value = data.get(key, [f"{prefix}{i}" for i in range(count)])
+            if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+                raise ValueError(f"{source}: {key} must be a list of strings")
+            names[key] = tuple(value)
+        fit = data.get("fit", {})
+        if not isinstance(fit, dict):
+            raise ValueError(f"{source}: fit must be an object")
         try:
-            return cls(
+            model = cls(
                 A=data["A"],
                 B=data["B"],
                 C=data["C"],
                 dt=data["dt"],
                 observability_indices=tuple(indices),
                 lam=data["lambda"],
-                input_names=tuple(data.get("input_names", [f"u{i}" for i in range(m)])),
-                output_names=tuple(data.get("output_names", [f"y{i}" for i in range(p)])),
-                fit=dict(data.get("fit", {})),
+                fit=dict(fit),
+                **names,
             )
         except ValueError as exc:
             raise ValueError(f"{source}: {exc}") from None
+        residual = model.alpha_canonical_residual()
+        if residual > 1e-9 * max(1.0, float(np.max(np.abs(model.A)))):
+            raise ValueError(
+                f"{source}: (A, C) is not in alpha-canonical form for observability indices "
+                f"{list(model.observability_indices)} (largest violation of eqs 5-8: {residual:.3g})"
+            )
+        return model
 
     def save(self, path: str | Path) -> None:
         Path(path).write_text(dumps_compact(self.to_dict()) + "\n")
 
     @classmethod
     def load(cls, path: str | Path) -> AlphaCanonicalModel:
-        path = Path(path)
-        try:
-            data = json.loads(path.read_text())
-        except FileNotFoundError:
-            raise ValueError(f"{path}: no such file") from None
-        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-            raise ValueError(f"{path}: not valid JSON ({exc})") from None
-        return cls.from_dict(data, source=str(path))
+        return cls.from_dict(read_json(path), source=str(path))
+
+
+def read_json(path: str | Path) -> Any:
+    """Parse a JSON file; a missing file or bad JSON is a ValueError naming the file."""
+    path = Path(path)
+    try:
+        return json.loads(path.read_text())
+    except FileNotFoundError:
+        raise ValueError(f"{path}: no such file") from None
+    except (OSError, json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise ValueError(f"{path}: not valid JSON ({exc})") from None
 
 
 def dumps_compact(obj: Any) -> str:
-    """JSON with one matrix row per line: readable diffs, exact round trip of floats."""
+    """JSON with one matrix row per line: readable diffs, exact round trip of floats.
+
+    NaN and inf are refused (ValueError): they are not JSON.
+    """
 
     def render(value: Any, indent: int) -> str:
         pad = " " * indent
@@ -304,11 +326,11 @@ def dumps_compact(obj: Any) -> str:
             items = [f"{pad} {json.dumps(k)}: {render(v, indent + 1)}" for k, v in value.items()]
             return "{\n" + ",\n".join(items) + "\n" + pad + "}"
         if isinstance(value, list) and value and all(isinstance(v, list) for v in value):
-            rows = [f"{pad} {json.dumps(v)}" for v in value]
+            rows = [f"{pad} {json.dumps(v, allow_nan=False)}" for v in value]
             return "[\n" + ",\n".join(rows) + "\n" + pad + "]"
         if isinstance(value, list) and any(isinstance(v, dict) for v in value):
             rows = [f"{pad} {render(v, indent + 1)}" for v in value]
             return "[\n" + ",\n".join(rows) + "\n" + pad + "]"
-        return json.dumps(value)
+        return json.dumps(value, allow_nan=False)
 
     return render(obj, 0)
