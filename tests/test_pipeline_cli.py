@@ -215,40 +215,22 @@ def test_cli_validate_scores_a_model_and_rejects_malformed_json(tmp_path, capsys
     write_record(data, rec)
     model_path = tmp_path / "model.json"
     identified_model(110).save(model_path)
-    assert (
-        main(
-            [
-                "validate",
-                "engine",
-                "--model",
-                str(model_path),
-                "--data",
-                str(data),
-                "--out",
-                str(tmp_path / "v"),
-            ]
-        )
-        == 0
-    )
+    argv = [
+        "validate",
+        "engine",
+        "--model",
+        str(model_path),
+        "--data",
+        str(data),
+        "--out",
+        str(tmp_path / "v"),
+    ]
+    assert main(argv) == 0
     assert "lowfreq.csv: model SEE" in capsys.readouterr().out
     assert (tmp_path / "v" / "lowfreq.png").exists()
     broken = json.loads(model_path.read_text())
     broken["B"] = broken["B"][:3]
     model_path.write_text(json.dumps(broken))
-    assert (
-        main(
-            [
-                "validate",
-                "engine",
-                "--model",
-                str(model_path),
-                "--data",
-                str(data),
-                "--out",
-                str(tmp_path / "v"),
-            ]
-        )
-        == 2
-    )
+    assert main(argv) == 2
     err = capsys.readouterr().err
     assert err.startswith("error: ") and "B has shape (3, 2)" in err and err.count("\n") == 1
