@@ -105,8 +105,92 @@ class TruthConfig:
         return cls(backlash=0.0, stiction=0.0, sensor_noise=0.0)
 
 
+def _float_clip(value: float, low: float, high: float) -> float:
+    return min(max(value, low), high)
+
+
+def _float_select(condition: bool, if_true: float, if_false: float) -> float:
+    return if_true if condition else if_false
+
+
+FLOAT_OPS = (_float_clip, _float_select)
+ARRAY_OPS = (np.clip, np.where)
+
+
+def engine_step(
+    x: list, linkage: list, valve: list, command: list, params: StepParameters, ops: tuple = ARRAY_OPS
+) -> tuple[list, list, list]:
+    """One sample of the engine truth: valve linkage, stiction, gains of eq 36, linear dynamics.
+
+    The dynamics use the alpha-canonical structure (eq 9): ``x(k+1) = A_o x + K y + B u*`` with
+    ``y`` the last p states, so a step costs n (p + m) multiply-adds and no product with the
+    zeros and ones of A_o. Every quantity is a list of columns, one per state or valve. A column
+    is a float (one engine, with ``FLOAT_OPS``) or an array of shape (N,) (N engines, with
+    ``ARRAY_OPS``); the arithmetic is the same sequence of IEEE operations either way, so an
+    engine gives the same bits alone as inside a batch. K, B and lambda may be floats or arrays
+    of shape (N,) (one model per engine).
+
+    Returns the new state columns, linkage positions and valve positions.
+    """
+    clip, select = ops
+    half, stick = params.half_backlash, params.stiction
+    if half:
+        linkage = [clip(lk, c - half, c + half) for lk, c in zip(linkage, command)]
+    else:
+        linkage = command
+    if stick:
+        valve = [select(abs(q - v) > stick, q, v) for q, v in zip(linkage, valve)]
+    else:
+        valve = linkage
+    u_star = [v + g * abs(v) for v, g in zip(valve, params.lam_minus_one)]
+    return alpha_update(x, u_star, params.shift_source, params.K, params.B), linkage, valve
+
+
+def alpha_update(x: list, u: list, shift_source: list[int], k_gain: list, b_gain: list) -> list:
+    """``x(k+1) = A_o x + K y + B u`` on state columns (eq 9), ``y`` the last p states.
+
+    ``shift_source[i]`` is the state A_o copies into state i (-1: none). Floats or (N,) arrays.
+    """
+    y = x[len(x) - len(k_gain[0]) :]
+    x_next = []
+    for source, k_row, b_row in zip(shift_source, k_gain, b_gain):
+        acc = x[source] if source >= 0 else 0.0
+        for k, yj in zip(k_row, y):
+            acc = acc + k * yj
+        for b, uj in zip(b_row, u):
+            acc = acc + b * uj
+        x_next.append(acc)
+    return x_next
+
+
+@dataclass(frozen=True)
+class StepParameters:
+    """What :func:`engine_step` needs: the alpha-canonical structure and K, B, lambda - 1 as nested
+    lists of floats (or of (N,) arrays), and the valve widths."""
+
+    shift_source: list[int]
+    K: list
+    B: list
+    lam_minus_one: list
+    half_backlash: float
+    stiction: float
+
+    @classmethod
+    def from_model(cls, model: AlphaCanonicalModel, config: TruthConfig) -> StepParameters:
+        a_o = model.structure.shift_matrix()
+        lam = model.lam - 1.0 if config.asymmetric_gains else np.zeros(model.n_inputs)
+        return cls(
+            shift_source=[int(np.argmax(row)) if row.any() else -1 for row in a_o],
+            K=model.K.tolist(),
+            B=model.B.tolist(),
+            lam_minus_one=lam.tolist(),
+            half_backlash=0.5 * config.backlash,
+            stiction=config.stiction,
+        )
+
+
 class EngineCore:
-    """N independent engines stepped together: valves, gains, linear dynamics.
+    """N independent engines stepped together with :func:`engine_step`.
 
     Parameters
     ----------
@@ -124,57 +208,31 @@ class EngineCore:
         self.model = model
         self.config = config
         self.n = n
-        self._at = model.A.T.copy()
-        self._bt = model.B.T.copy()
-        self._ct = model.C.T.copy()
-        self._lam_minus_one = (model.lam - 1.0) if config.asymmetric_gains else np.zeros(model.n_inputs)
-        self._half_backlash = 0.5 * config.backlash
-        self.x = np.zeros((n, model.A.shape[0]))
-        self.linkage = np.zeros((n, model.n_inputs))
-        self.valve = np.zeros((n, model.n_inputs))
+        self.params = StepParameters.from_model(model, config)
+        self.x = [np.zeros(n) for _ in range(model.A.shape[0])]
+        self.linkage = [np.zeros(n) for _ in range(model.n_inputs)]
+        self.valve = [np.zeros(n) for _ in range(model.n_inputs)]
 
     def reset(self, mask: np.ndarray | None = None) -> None:
         """Zero the state of all engines, or of those where ``mask`` is True."""
-        if mask is None:
-            self.x[:] = 0.0
-            self.linkage[:] = 0.0
-            self.valve[:] = 0.0
-        else:
-            self.x[mask] = 0.0
-            self.linkage[mask] = 0.0
-            self.valve[mask] = 0.0
+        for column in (*self.x, *self.linkage, *self.valve):
+            if mask is None:
+                column[:] = 0.0
+            else:
+                column[mask] = 0.0
 
     def output(self) -> np.ndarray:
-        """Noise-free outputs y = C x, shape (n, p)."""
-        y = self.x[:, :1] * self._ct[0]
-        for j in range(1, self._ct.shape[0]):
-            y += self.x[:, j : j + 1] * self._ct[j]
-        return y
+        """Noise-free outputs y = C x (the last p states), shape (n, p)."""
+        return np.column_stack(self.x[len(self.x) - self.model.n_outputs :])
 
     def step(self, command: np.ndarray) -> np.ndarray:
-        """Advance one sample with valve commands of shape (n, m); returns the valve positions."""
-        if self._half_backlash > 0.0:
-            np.clip(
-                self.linkage, command - self._half_backlash, command + self._half_backlash, out=self.linkage
-            )
-            position = self.linkage
-        else:
-            position = command
-        if self.config.stiction > 0.0:
-            slip = np.abs(position - self.valve) > self.config.stiction
-            np.copyto(self.valve, position, where=slip)
-        else:
-            self.valve[:] = position
-        u_star = self.valve + self._lam_minus_one * np.abs(self.valve)
-        # Column-by-column products instead of a matrix product: BLAS picks different kernels
-        # for different batch sizes, and each engine must give the same bits alone or batched.
-        x_next = self.x[:, :1] * self._at[0]
-        for j in range(1, self._at.shape[0]):
-            x_next += self.x[:, j : j + 1] * self._at[j]
-        for j in range(self._bt.shape[0]):
-            x_next += u_star[:, j : j + 1] * self._bt[j]
-        self.x = x_next
-        return self.valve
+        """Advance one sample with valve commands of shape (n, m); returns the valve positions (n, m)."""
+        columns = [command[:, j] for j in range(command.shape[1])]
+        self.x, self.linkage, self.valve = engine_step(self.x, self.linkage, self.valve, columns, self.params)
+        # copies: with no backlash or stiction these columns are views of the caller's command
+        self.linkage = [np.array(c, dtype=float) for c in self.linkage]
+        self.valve = [np.array(c, dtype=float) for c in self.valve]
+        return np.column_stack(self.valve)
 
 
 def simulate(
