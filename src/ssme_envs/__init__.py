@@ -7,4 +7,20 @@ try:
 except PackageNotFoundError:  # running from a source tree that was not installed
     __version__ = "0.0.0"
 
+
+def _register() -> None:
+    from gymnasium.envs.registration import register, registry
+
+    if "ssme_envs/EngineTracking-v0" in registry:
+        return
+    register(
+        id="ssme_envs/EngineTracking-v0",
+        entry_point="ssme_envs.envs.engine_tracking:EngineTrackingEnv",
+        vector_entry_point="ssme_envs.envs.vector:EngineTrackingVectorEnv",
+        max_episode_steps=250,
+    )
+
+
+_register()
+
 __all__ = ["__version__"]

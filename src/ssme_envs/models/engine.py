@@ -105,73 +105,15 @@ class TruthConfig:
         return cls(backlash=0.0, stiction=0.0, sensor_noise=0.0)
 
 
-def _float_clip(value: float, low: float, high: float) -> float:
-    return min(max(value, low), high)
-
-
-def _float_select(condition: bool, if_true: float, if_false: float) -> float:
-    return if_true if condition else if_false
-
-
-FLOAT_OPS = (_float_clip, _float_select)
-ARRAY_OPS = (np.clip, np.where)
-
-
-def engine_step(
-    x: list, linkage: list, valve: list, command: list, params: StepParameters, ops: tuple = ARRAY_OPS
-) -> tuple[list, list, list]:
-    """One sample of the engine truth: valve linkage, stiction, gains of eq 36, linear dynamics.
-
-    The dynamics use the alpha-canonical structure (eq 9): ``x(k+1) = A_o x + K y + B u*`` with
-    ``y`` the last p states, so a step costs n (p + m) multiply-adds and no product with the
-    zeros and ones of A_o. Every quantity is a list of columns, one per state or valve. A column
-    is a float (one engine, with ``FLOAT_OPS``) or an array of shape (N,) (N engines, with
-    ``ARRAY_OPS``); the arithmetic is the same sequence of IEEE operations either way, so an
-    engine gives the same bits alone as inside a batch. K, B and lambda may be floats or arrays
-    of shape (N,) (one model per engine).
-
-    Returns the new state columns, linkage positions and valve positions.
-    """
-    clip, select = ops
-    half, stick = params.half_backlash, params.stiction
-    if half:
-        linkage = [clip(lk, c - half, c + half) for lk, c in zip(linkage, command)]
-    else:
-        linkage = command
-    if stick:
-        valve = [select(abs(q - v) > stick, q, v) for q, v in zip(linkage, valve)]
-    else:
-        valve = linkage
-    u_star = [v + g * abs(v) for v, g in zip(valve, params.lam_minus_one)]
-    return alpha_update(x, u_star, params.shift_source, params.K, params.B), linkage, valve
-
-
-def alpha_update(x: list, u: list, shift_source: list[int], k_gain: list, b_gain: list) -> list:
-    """``x(k+1) = A_o x + K y + B u`` on state columns (eq 9), ``y`` the last p states.
-
-    ``shift_source[i]`` is the state A_o copies into state i (-1: none). Floats or (N,) arrays.
-    """
-    y = x[len(x) - len(k_gain[0]) :]
-    x_next = []
-    for source, k_row, b_row in zip(shift_source, k_gain, b_gain):
-        acc = x[source] if source >= 0 else 0.0
-        for k, yj in zip(k_row, y):
-            acc = acc + k * yj
-        for b, uj in zip(b_row, u):
-            acc = acc + b * uj
-        x_next.append(acc)
-    return x_next
-
-
 @dataclass(frozen=True)
 class StepParameters:
-    """What :func:`engine_step` needs: the alpha-canonical structure and K, B, lambda - 1 as nested
-    lists of floats (or of (N,) arrays), and the valve widths."""
+    """What one engine step needs: the alpha-canonical shift structure, K, B, lambda - 1 (arrays,
+    with a leading batch axis when every engine has its own model), and the valve widths."""
 
-    shift_source: list[int]
-    K: list
-    B: list
-    lam_minus_one: list
+    shift_source: tuple[int, ...]
+    K: np.ndarray
+    B: np.ndarray
+    lam_minus_one: np.ndarray
     half_backlash: float
     stiction: float
 
@@ -180,22 +122,96 @@ class StepParameters:
         a_o = model.structure.shift_matrix()
         lam = model.lam - 1.0 if config.asymmetric_gains else np.zeros(model.n_inputs)
         return cls(
-            shift_source=[int(np.argmax(row)) if row.any() else -1 for row in a_o],
-            K=model.K.tolist(),
-            B=model.B.tolist(),
-            lam_minus_one=lam.tolist(),
+            shift_source=tuple(int(np.argmax(row)) if row.any() else -1 for row in a_o),
+            K=model.K,
+            B=model.B.copy(),
+            lam_minus_one=lam,
             half_backlash=0.5 * config.backlash,
-            stiction=config.stiction,
+            stiction=float(config.stiction),
         )
+
+    def floats(self) -> tuple[list, list, list]:
+        """K and B rows and lambda - 1 as Python floats, for :func:`step_floats`."""
+        return self.K.tolist(), self.B.tolist(), self.lam_minus_one.tolist()
+
+
+# The engine step exists twice, on purpose: on Python floats for one engine (an order of
+# magnitude faster than numpy on 1-element arrays, for the scalar environment) and on arrays
+# for a batch (the vector environment, the simulators). Both perform the same IEEE operations
+# in the same order, so an engine gives the same bits alone or batched; tests hold them to it.
+# Order: linkage = min(max(l, c - h), c + h); valve = q if |q - v| > s else v;
+# u* = v + (lambda - 1)|v|; x_i <- (x_src(i) + sum_j K_ij y_j) + sum_j B_ij u*_j, sums left to right.
+
+
+def step_floats(x: list, linkage: list, valve: list, command: list, p: StepParameters, rows: tuple) -> tuple:
+    """One engine, one sample, on floats; ``rows`` = ``p.floats()``. Returns (x, linkage, valve)."""
+    k_rows, b_rows, lam = rows
+    half, stick = p.half_backlash, p.stiction
+    if half:
+        linkage = [min(max(lk, c - half), c + half) for lk, c in zip(linkage, command)]
+    else:
+        linkage = command
+    if stick:
+        valve = [q if abs(q - v) > stick else v for q, v in zip(linkage, valve)]
+    else:
+        valve = linkage
+    u = [v + g * abs(v) for v, g in zip(valve, lam)]
+    y = x[len(x) - len(k_rows[0]) :]
+    x_next = []
+    for source, k_row, b_row in zip(p.shift_source, k_rows, b_rows):
+        ky = k_row[0] * y[0]
+        for k, yj in zip(k_row[1:], y[1:]):
+            ky = ky + k * yj
+        bu = b_row[0] * u[0]
+        for b, uj in zip(b_row[1:], u[1:]):
+            bu = bu + b * uj
+        x_next.append(((x[source] if source >= 0 else 0.0) + ky) + bu)
+    return x_next, linkage, valve
+
+
+def step_arrays(
+    x: np.ndarray, linkage: np.ndarray, valve: np.ndarray, command: np.ndarray, p: StepParameters
+):
+    """N engines, one sample, state-major: x (n, N), linkage, valve, command (m, N). Returns
+    (x, linkage, valve). Rows are contiguous, so every operation runs over N engines at once."""
+    if p.half_backlash:
+        linkage = np.clip(linkage, command - p.half_backlash, command + p.half_backlash)
+    else:
+        linkage = command
+    if p.stiction:
+        valve = np.where(np.abs(linkage - valve) > p.stiction, linkage, valve)
+    else:
+        valve = linkage
+    lam = p.lam_minus_one
+    u = valve + (lam[:, None] if lam.ndim == 1 else lam) * np.abs(valve)
+    k_gain, b_gain = p.K, p.B  # (n, p) and (n, m), or (n, p, N) and (n, m, N): one model per engine
+    n_out = k_gain.shape[1]
+    y = x[x.shape[0] - n_out :]
+    ky = _column(k_gain, 0) * y[0]
+    for j in range(1, n_out):
+        ky = ky + _column(k_gain, j) * y[j]
+    bu = _column(b_gain, 0) * u[0]
+    for j in range(1, b_gain.shape[1]):
+        bu = bu + _column(b_gain, j) * u[j]
+    shifted = np.zeros_like(ky)
+    for i, source in enumerate(p.shift_source):
+        if source >= 0:
+            shifted[i] = x[source]
+    return (shifted + ky) + bu, linkage, valve
+
+
+def _column(gain: np.ndarray, j: int) -> np.ndarray:
+    """Column j of a gain as (n, 1) to multiply a row of N engines, or (n, N) when per engine."""
+    return gain[:, j, None] if gain.ndim == 2 else gain[:, j]
 
 
 class EngineCore:
-    """N independent engines stepped together with :func:`engine_step`.
+    """N independent engines stepped together (:func:`step_arrays`).
 
     Parameters
     ----------
     model : AlphaCanonicalModel
-        The point model (any state-space model with the same semantics works).
+        The point model (any model in alpha-canonical form).
     config : TruthConfig
         The valve and gain effects (sensor noise is left to the caller, who draws it).
     n : int
@@ -209,30 +225,26 @@ class EngineCore:
         self.config = config
         self.n = n
         self.params = StepParameters.from_model(model, config)
-        self.x = [np.zeros(n) for _ in range(model.A.shape[0])]
-        self.linkage = [np.zeros(n) for _ in range(model.n_inputs)]
-        self.valve = [np.zeros(n) for _ in range(model.n_inputs)]
+        self.x = np.zeros((model.A.shape[0], n))  # state-major: row i is state i of every engine
+        self.linkage = np.zeros((model.n_inputs, n))
+        self.valve = np.zeros((model.n_inputs, n))
 
     def reset(self, mask: np.ndarray | None = None) -> None:
         """Zero the state of all engines, or of those where ``mask`` is True."""
-        for column in (*self.x, *self.linkage, *self.valve):
-            if mask is None:
-                column[:] = 0.0
-            else:
-                column[mask] = 0.0
+        engines = slice(None) if mask is None else mask
+        self.x[:, engines] = 0.0
+        self.linkage[:, engines] = 0.0
+        self.valve[:, engines] = 0.0
 
     def output(self) -> np.ndarray:
         """Noise-free outputs y = C x (the last p states), shape (n, p)."""
-        return np.column_stack(self.x[len(self.x) - self.model.n_outputs :])
+        return self.x[self.x.shape[0] - self.model.n_outputs :].T.copy()
 
     def step(self, command: np.ndarray) -> np.ndarray:
         """Advance one sample with valve commands of shape (n, m); returns the valve positions (n, m)."""
-        columns = [command[:, j] for j in range(command.shape[1])]
-        self.x, self.linkage, self.valve = engine_step(self.x, self.linkage, self.valve, columns, self.params)
-        # copies: with no backlash or stiction these columns are views of the caller's command
-        self.linkage = [np.array(c, dtype=float) for c in self.linkage]
-        self.valve = [np.array(c, dtype=float) for c in self.valve]
-        return np.column_stack(self.valve)
+        command = np.array(np.asarray(command, dtype=float).T)  # a copy: the valves may keep it
+        self.x, self.linkage, self.valve = step_arrays(self.x, self.linkage, self.valve, command, self.params)
+        return self.valve.T.copy()
 
 
 def simulate(
@@ -280,10 +292,19 @@ def simulate(
     if np.any(noise_std > 0) and rng is None:
         raise ValueError("sensor noise is on: pass a seeded numpy Generator as rng")
     clean = np.empty((n_runs, horizon, model.n_outputs))
-    core = EngineCore(model, config, n_runs)
-    for k in range(horizon):
-        clean[:, k] = core.output()
-        core.step(u[:, k])
+    if n_runs == 1:  # the float path: same bits, an order of magnitude faster
+        params = StepParameters.from_model(model, config)
+        rows = params.floats()
+        x, linkage, valve = [0.0] * model.A.shape[0], [0.0] * model.n_inputs, [0.0] * model.n_inputs
+        n_out = model.n_outputs
+        for k, command in enumerate(u[0].tolist()):
+            clean[0, k] = x[len(x) - n_out :]
+            x, linkage, valve = step_floats(x, linkage, valve, command, params, rows)
+    else:
+        core = EngineCore(model, config, n_runs)
+        for k in range(horizon):
+            clean[:, k] = core.output()
+            core.step(u[:, k])
     measured = clean.copy()
     if np.any(noise_std > 0):
         measured += noise_std * rng.standard_normal(clean.shape)

@@ -1,0 +1,383 @@
+"""Chamber pressure and mixture ratio tracking at one SSME power level."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from scipy.special import ndtr
+
+from ssme_envs.envs.references import REFERENCE_KINDS, Fault, reference_signals, uniforms_needed
+from ssme_envs.models.engine import (
+    POWER_LEVELS,
+    StepParameters,
+    TruthConfig,
+    identified_model,
+    step_arrays,
+    step_floats,
+)
+from ssme_envs.models.linked import LinkedEngineModel
+from ssme_envs.models.statespace import AlphaCanonicalModel
+
+OBS_NAMES = (
+    "pc_pct", "mr_pct", "pc_ref_pct", "mr_ref_pct", "pc_err_pct", "mr_err_pct",
+    "pc_err_int", "mr_err_int", "prev_opov", "prev_fpov",
+)  # fmt: skip
+
+
+def resolve_truth(truth: TruthConfig | Mapping[str, Any] | None) -> TruthConfig:
+    """A TruthConfig from one, from a dict of its fields, or the default."""
+    if truth is None:
+        return TruthConfig()
+    if isinstance(truth, TruthConfig):
+        return truth
+    if isinstance(truth, Mapping):
+        unknown = sorted(set(truth) - set(TruthConfig.__dataclass_fields__))
+        if unknown:
+            raise ValueError(f"truth: unknown option(s) {', '.join(unknown)}")
+        return TruthConfig(**truth)
+    raise ValueError(f"truth must be a TruthConfig or a dict, got {type(truth).__name__}")
+
+
+def resolve_plant(plant: str | Path | AlphaCanonicalModel, power: float) -> AlphaCanonicalModel:
+    """The engine model behind an environment.
+
+    ``"truth"``: the linked published model at ``power`` (Table I itself at 70-100 %);
+    ``"identified"``: the packaged design model identified at ``power`` (70, 80, 90, 100, 110 %);
+    a path to an engine model.json; or a model object.
+    """
+    if isinstance(plant, AlphaCanonicalModel):
+        return plant
+    if plant == "truth":
+        return LinkedEngineModel().local_model(power)
+    if plant == "identified":
+        if power not in POWER_LEVELS:
+            raise ValueError(f"plant='identified' exists at power {list(POWER_LEVELS)} %, got {power!r}")
+        return identified_model(int(power))
+    if isinstance(plant, str | Path) and str(plant).endswith(".json"):
+        return AlphaCanonicalModel.load(plant)
+    raise ValueError(f"plant must be 'truth', 'identified', a model.json path or a model, got {plant!r}")
+
+
+@dataclass(frozen=True)
+class EngineTask:
+    """Everything an engine tracking episode needs, shared by the scalar and the vector env."""
+
+    params: StepParameters
+    n_states: int
+    dt: float
+    horizon: int
+    action_scale: float
+    amplitude: np.ndarray
+    reference: str
+    noise_std: np.ndarray
+    fault: Fault | None
+    error_weight: float = 0.1
+    rate_weight: float = 0.1
+    envelope: float = 0.1  # normalized output deviation that ends an episode (10 %)
+    integral_limit: float = 100.0  # % s, anti-windup bound of the error integrals
+    rows: tuple = field(init=False, repr=False)  # K, B, lambda - 1 as floats, for the scalar step
+    fault_step: int = field(init=False)  # the step after which the fault acts (-1: none)
+
+    @classmethod
+    def build(
+        cls,
+        power: float = 100.0,
+        plant: str | Path | AlphaCanonicalModel = "truth",
+        truth: TruthConfig | Mapping[str, Any] | None = None,
+        reference: str = "random_steps",
+        reference_amplitude: float | tuple[float, float] = 0.01,
+        fault: Mapping[str, Any] | Fault | None = None,
+        episode_seconds: float = 10.0,
+        action_scale: float = 0.02,
+    ) -> EngineTask:
+        power = LinkedEngineModel.check_power(power)
+        model = resolve_plant(plant, power)
+        if model.n_inputs != 2 or model.n_outputs != 2:
+            raise ValueError(
+                "plant must have 2 inputs (OPOV, FPOV) and 2 outputs (Pc, MR), "
+                f"got {model.n_inputs} and {model.n_outputs}"
+            )
+        config = resolve_truth(truth)
+        if reference not in REFERENCE_KINDS:
+            raise ValueError(f"unknown reference {reference!r}; choose one of {', '.join(REFERENCE_KINDS)}")
+        amplitude = np.broadcast_to(np.asarray(reference_amplitude, dtype=float), (2,)).copy()
+        if not np.all(np.isfinite(amplitude)) or np.any(amplitude < 0) or np.any(amplitude > 0.05):
+            raise ValueError(
+                f"reference_amplitude must be within 0-0.05 (normalized), got {reference_amplitude!r}"
+            )
+        if not (isinstance(episode_seconds, int | float) and 1.0 <= episode_seconds <= 3600.0):
+            raise ValueError(f"episode_seconds must be within 1-3600 s, got {episode_seconds!r}")
+        if not (isinstance(action_scale, int | float) and 0 < action_scale <= 0.2):
+            raise ValueError(
+                f"action_scale must be within (0, 0.2] normalized valve travel, got {action_scale!r}"
+            )
+        noise = np.broadcast_to(np.atleast_1d(np.asarray(config.sensor_noise, dtype=float)), (2,)).copy()
+        return cls(
+            params=StepParameters.from_model(model, config),
+            n_states=model.A.shape[0],
+            dt=model.dt,
+            horizon=round(episode_seconds / model.dt),
+            action_scale=float(action_scale),
+            amplitude=amplitude,
+            reference=reference,
+            noise_std=noise,
+            fault=Fault.parse(fault, 2, 2),
+        )
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "rows", self.params.floats())
+        object.__setattr__(
+            self, "fault_step", round(self.fault.time / self.dt) if self.fault is not None else -1
+        )
+
+    @property
+    def step_cost_bound(self) -> float:
+        """Largest reward loss of one step inside the envelope (errors and valve rates at their bounds)."""
+        error = 100.0 * (self.envelope + float(self.amplitude.max())) + 50.0
+        return self.error_weight * 2 * error**2 + self.rate_weight * 2 * 2.0**2
+
+    @property
+    def draw_size(self) -> int:
+        """Standard normal numbers one episode consumes: sensor noise, then the reference's."""
+        return 2 * (self.horizon + 1) + uniforms_needed(self.reference, self.horizon + 1, 2, self.dt)
+
+    def episodes(self, draws: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """References (float64) and unit sensor-noise draws (float32, scaled by ``noise_std`` at
+        each step) of k episodes from their standard normal draws (k, draw_size, float32), each
+        of shape (k, horizon + 1, 2). One float32 call to the generator per episode keeps resets
+        cheap (the vector env resets thousands at once), and an episode computed alone equals the
+        same episode in a batch."""
+        k, length = draws.shape[0], self.horizon + 1
+        noise = draws[:, : 2 * length].reshape(k, length, 2)
+        uniforms = ndtr(draws[:, 2 * length :].astype(np.float64))
+        refs = reference_signals(self.reference, uniforms, length, self.amplitude, self.dt)
+        return refs, noise
+
+
+# The environment step exists twice, like the engine step it calls: on floats for the scalar
+# env and on (N, .) arrays for the vector env, with the same operations in the same order so that
+# both give the same bits (tested against gymnasium's SyncVectorEnv).
+
+
+def scalar_step(task: EngineTask, state: list, a0: float, a1: float, t: int, ref: list, noise: list):
+    """One env, one step. ``state`` = [x, linkage, valve, integrals, previous action, held command];
+    ``t`` the step index after this step; ``ref``, ``noise`` the episode values at ``t`` (noise
+    as unit draws).
+    Returns (state, observation list, reward, terminated)."""
+    x, linkage, valve, integral, prev, held = state
+    cmd = [a0 * task.action_scale, a1 * task.action_scale]
+    fault = task.fault
+    if fault is not None and t > task.fault_step:
+        i = fault.index
+        if fault.kind == "stuck_valve":
+            if t == task.fault_step + 1:
+                held = cmd[i]
+            cmd[i] = held
+        elif fault.kind == "gain_loss":
+            cmd[i] = cmd[i] * fault.magnitude
+    x, linkage, valve = step_floats(x, linkage, valve, cmd, task.params, task.rows)
+    y0, y1 = x[-2], x[-1]
+    m0, m1 = y0 + noise[0] * task.noise_std[0], y1 + noise[1] * task.noise_std[1]
+    if fault is not None and fault.kind == "sensor_bias" and t > task.fault_step:
+        if fault.index == 0:
+            m0 = m0 + fault.magnitude
+        else:
+            m1 = m1 + fault.magnitude
+    e0, e1 = 100.0 * (ref[0] - m0), 100.0 * (ref[1] - m1)
+    lim = task.integral_limit
+    i0 = min(max(integral[0] + e0 * task.dt, -lim), lim)
+    i1 = min(max(integral[1] + e1 * task.dt, -lim), lim)
+    d0, d1 = a0 - prev[0], a1 - prev[1]
+    reward = -task.error_weight * (e0 * e0 + e1 * e1) - task.rate_weight * (d0 * d0 + d1 * d1)
+    terminated = abs(y0) > task.envelope or abs(y1) > task.envelope
+    if terminated:
+        reward = reward - task.step_cost_bound * (task.horizon - t + 1)
+    obs = [100.0 * m0, 100.0 * m1, 100.0 * ref[0], 100.0 * ref[1], e0, e1, i0, i1, a0, a1]
+    return [x, linkage, valve, [i0, i1], [a0, a1], held], obs, reward, terminated
+
+
+def batch_step(
+    task: EngineTask, state: list, acts: np.ndarray, t: np.ndarray, ref: np.ndarray, noise: np.ndarray
+):
+    """N envs, one step, as :func:`scalar_step` on state-major arrays: acts, ref, noise (2, N),
+    t (N,). Returns (state, observations (10, N) float64, rewards (N,), terminated (N,))."""
+    x, linkage, valve, integral, prev, held = state
+    cmd = acts * task.action_scale
+    fault = task.fault
+    if fault is not None:
+        i, active = fault.index, t > task.fault_step
+        if fault.kind == "stuck_valve":
+            held = np.where(t == task.fault_step + 1, cmd[i], held)
+            cmd[i] = np.where(active, held, cmd[i])
+        elif fault.kind == "gain_loss":
+            cmd[i] = np.where(active, cmd[i] * fault.magnitude, cmd[i])
+    x, linkage, valve = step_arrays(x, linkage, valve, cmd, task.params)
+    y = x[x.shape[0] - 2 :]
+    m = y + noise * task.noise_std[:, None]
+    if fault is not None and fault.kind == "sensor_bias":
+        m[fault.index] = np.where(t > task.fault_step, m[fault.index] + fault.magnitude, m[fault.index])
+    e = 100.0 * (ref - m)
+    integral = np.clip(integral + e * task.dt, -task.integral_limit, task.integral_limit)
+    d = acts - prev
+    e2, d2 = e * e, d * d
+    reward = -task.error_weight * (e2[0] + e2[1]) - task.rate_weight * (d2[0] + d2[1])
+    terminated = (np.abs(y[0]) > task.envelope) | (np.abs(y[1]) > task.envelope)
+    reward = np.where(terminated, reward - task.step_cost_bound * (task.horizon - t + 1), reward)
+    obs = np.concatenate([100.0 * m, 100.0 * ref, e, integral, acts], axis=0)
+    return [x, linkage, valve, integral, acts, held], obs, reward, terminated
+
+
+def initial_observation(ref: np.ndarray, draws: np.ndarray, noise_std: np.ndarray) -> np.ndarray:
+    """Observations at reset (zero state: the measured outputs are the sensor noise), float32.
+
+    ``ref`` and the unit noise ``draws`` have the channel first: (2,) for one env, (2, N) for N
+    envs; the result is (10,) or (10, N)."""
+    ref = np.asarray(ref, dtype=float)
+    noise = np.asarray(draws) * (noise_std if np.ndim(draws) == 1 else noise_std[:, None])
+    zeros = np.zeros_like(noise)
+    obs = np.concatenate([100.0 * noise, 100.0 * ref, 100.0 * (ref - noise), zeros, zeros], axis=0)
+    return obs.astype(np.float32)
+
+
+def observation_space() -> gym.spaces.Box:
+    high = np.array([50, 50, 50, 50, 100, 100, 100, 100, 1, 1], dtype=np.float32)
+    return gym.spaces.Box(-high, high, dtype=np.float32)
+
+
+def check_action_values(a0: float, a1: float) -> None:
+    if not (math.isfinite(a0) and math.isfinite(a1)):
+        raise ValueError(f"action must be finite, got {[a0, a1]} (NaN or inf)")
+
+
+class EngineTrackingEnv(gym.Env):
+    """Track chamber pressure (Pc) and mixture ratio (MR) with the OPOV and FPOV valves.
+
+    The plant is an SSME point model (NASA TM-104422) at one power level, 0.04 s per step: by
+    default the truth (the linked published model at ``power`` with the lambda gains of eq 36,
+    valve backlash and stiction, sensor noise), or an identified design model, or any engine
+    model.json. Quantities are deviations from the operating point; percentages are of the
+    100 % point values (d Pc = 0.01 is 1 %).
+
+    ## Action Space
+    ``Box(-1, 1, (2,), float32)``: OPOV and FPOV valve commands; the valve deviation is
+    ``action * action_scale`` (default 0.02 normalized valve travel). Out-of-range actions are
+    clipped; NaN or inf raises ValueError.
+
+    ## Observation Space
+    ``Box((10,), float32)``, finite bounds, clipped into them:
+
+    | index | observation | unit | bound |
+    |---|---|---|---|
+    | 0, 1 | measured Pc, MR deviation | % | +-50 |
+    | 2, 3 | Pc, MR reference | % | +-50 |
+    | 4, 5 | tracking errors (reference - measured) | % | +-100 |
+    | 6, 7 | integrals of the errors (anti-windup at +-100) | % s | +-100 |
+    | 8, 9 | previous action | - | +-1 |
+
+    ## Rewards
+    ``-0.1 (e_pc^2 + e_mr^2) - 0.1 |a_k - a_(k-1)|^2`` with errors in %: about -0.1 per step
+    for 1 % errors. Leaving the envelope (|Pc| or |MR| deviation above 10 %) terminates the
+    episode with a penalty larger than the worst cost of all remaining steps, so ending early
+    never pays.
+
+    ## Starting State
+    The operating point (zero deviations, valves at their nominal positions).
+
+    ## Episode End
+    Termination on leaving the envelope; truncation after ``episode_seconds`` (10 s, 250 steps).
+
+    ## Arguments
+    power : 65-109 %, default 100. plant : "truth" (default), "identified" (at 70-110 %), a
+    model.json path or a model. truth : TruthConfig or dict (asymmetric_gains, backlash,
+    stiction, sensor_noise), the effects added to the plant. reference : "random_steps"
+    (default), "step", "ramp", "prbs", "zero"; reference_amplitude (normalized, default 0.01).
+    fault : e.g. ``{"kind": "stuck_valve", "time": 4.0, "index": 0}``, ``{"kind": "sensor_bias",
+    "time": 4.0, "index": 0, "magnitude": 0.005}``, ``{"kind": "gain_loss", "time": 4.0,
+    "index": 1, "magnitude": 0.5}``. episode_seconds, action_scale. render_mode : "human" or
+    "rgb_array".
+    """
+
+    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 25}
+
+    def __init__(self, render_mode: str | None = None, **options: Any) -> None:
+        self.task = EngineTask.build(**options)
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(
+                f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}"
+            )
+        self.render_mode = render_mode
+        self.action_space = gym.spaces.Box(-1.0, 1.0, (2,), dtype=np.float32)
+        self.observation_space = observation_space()
+        self._low, self._high = self.observation_space.low, self.observation_space.high
+        self._history: list[list[float]] = []
+        self._figure = None
+        self._t = 0
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[np.ndarray, dict]:
+        super().reset(seed=seed)
+        draws = self.np_random.standard_normal((1, self.task.draw_size), dtype=np.float32)
+        refs, noise = self.task.episodes(draws)
+        refs, noise = refs[0], noise[0]
+        self._refs, self._noise = refs.tolist(), noise.astype(np.float64).tolist()
+        self._state = [[0.0] * self.task.n_states, [0.0, 0.0], [0.0, 0.0], [0.0, 0.0], [0.0, 0.0], 0.0]
+        self._t = 0
+        obs = np.clip(initial_observation(refs[0], noise[0], self.task.noise_std), self._low, self._high)
+        self._history = [[0.0, 0.0, *refs[0], 0.0, 0.0]] if self.render_mode else []
+        return obs, {}
+
+    def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict]:
+        a0, a1 = float(action[0]), float(action[1])
+        check_action_values(a0, a1)
+        a0, a1 = min(max(a0, -1.0), 1.0), min(max(a1, -1.0), 1.0)
+        t = self._t + 1
+        self._state, obs, reward, terminated = scalar_step(
+            self.task, self._state, a0, a1, t, self._refs[t], self._noise[t]
+        )
+        self._t = t
+        if self.render_mode:
+            valve = self._state[2]
+            self._history.append([obs[0] / 100.0, obs[1] / 100.0, *self._refs[t], valve[0], valve[1]])
+            if self.render_mode == "human":
+                self.render()
+        out = np.clip(np.array(obs, dtype=np.float32), self._low, self._high)
+        return out, reward, terminated, t >= self.task.horizon, {}
+
+    def render(self) -> np.ndarray | None:
+        if self.render_mode is None:
+            gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array' or 'human'")
+            return None
+        from ssme_envs.envs.rendering import render_history
+
+        image, self._figure = render_history(
+            np.array(self._history),
+            self.task.dt,
+            self._figure,
+            self.render_mode,
+            ("Pc", "MR"),
+            ("OPOV", "FPOV"),
+        )
+        return image
+
+    def close(self) -> None:
+        if self._figure is not None:
+            from ssme_envs.envs.rendering import close_figure
+
+            close_figure(self._figure)
+            self._figure = None
+
+    def describe(self) -> dict[str, Any]:
+        """The task's settings, for logs and reports."""
+        return {
+            k: (v.tolist() if isinstance(v, np.ndarray) else v)
+            for k, v in asdict(self.task).items()
+            if k != "params"
+        }
+
+
+__all__ = ["EngineTask", "EngineTrackingEnv", "batch_step", "initial_observation", "scalar_step"]
