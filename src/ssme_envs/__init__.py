@@ -19,6 +19,12 @@ def _register() -> None:
         vector_entry_point="ssme_envs.envs.vector:EngineTrackingVectorEnv",
         max_episode_steps=250,
     )
+    register(
+        id="ssme_envs/EngineThrottle-v0",
+        entry_point="ssme_envs.envs.engine_throttle:EngineThrottleEnv",
+        vector_entry_point="ssme_envs.envs.vector:EngineThrottleVectorEnv",
+        max_episode_steps=1500,
+    )
 
 
 _register()

@@ -1,6 +1,7 @@
 """Gymnasium environments on the identified rocket-hardware models."""
 
+from ssme_envs.envs.engine_throttle import EngineThrottleEnv
 from ssme_envs.envs.engine_tracking import EngineTrackingEnv
-from ssme_envs.envs.vector import EngineTrackingVectorEnv
+from ssme_envs.envs.vector import EngineThrottleVectorEnv, EngineTrackingVectorEnv
 
-__all__ = ["EngineTrackingEnv", "EngineTrackingVectorEnv"]
+__all__ = ["EngineThrottleEnv", "EngineThrottleVectorEnv", "EngineTrackingEnv", "EngineTrackingVectorEnv"]

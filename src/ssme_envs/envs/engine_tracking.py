@@ -79,7 +79,7 @@ class EngineTask:
     fault: Fault | None
     error_weight: float = 0.1
     rate_weight: float = 0.1
-    envelope: float = 0.1  # normalized output deviation that ends an episode (10 %)
+    envelope: float = 0.1  # tracking error (noise-free, normalized) that ends an episode (10 %)
     integral_limit: float = 100.0  # % s, anti-windup bound of the error integrals
     rows: tuple = field(init=False, repr=False)  # K, B, lambda - 1 as floats, for the scalar step
     fault_step: int = field(init=False)  # the step after which the fault acts (-1: none)
@@ -136,6 +136,29 @@ class EngineTask:
             self, "fault_step", round(self.fault.time / self.dt) if self.fault is not None else -1
         )
 
+    # The plant: point model with valves (this class) or the linked model (the throttle task).
+    @property
+    def initial_outputs(self) -> np.ndarray:
+        return np.zeros(2)
+
+    def initial_plant_floats(self) -> list:
+        return [[0.0] * self.n_states, [0.0, 0.0], [0.0, 0.0]]
+
+    def initial_plant_arrays(self, n: int) -> list:
+        return [np.zeros((self.n_states, n)), np.zeros((2, n)), np.zeros((2, n))]
+
+    def plant_floats(self, plant: list, cmd: list, t: int) -> tuple[list, float, float]:
+        x, linkage, valve = step_floats(*plant, cmd, self.params, self.rows)
+        return [x, linkage, valve], x[-2], x[-1]
+
+    def plant_arrays(self, plant: list, cmd: np.ndarray, t: np.ndarray) -> tuple[list, np.ndarray]:
+        x, linkage, valve = step_arrays(*plant, cmd, self.params)
+        return [x, linkage, valve], x[x.shape[0] - 2 :]
+
+    @staticmethod
+    def valve_positions(plant: list) -> list:
+        return plant[-1]
+
     @property
     def step_cost_bound(self) -> float:
         """Largest reward loss of one step inside the envelope (errors and valve rates at their bounds)."""
@@ -166,11 +189,10 @@ class EngineTask:
 
 
 def scalar_step(task: EngineTask, state: list, a0: float, a1: float, t: int, ref: list, noise: list):
-    """One env, one step. ``state`` = [x, linkage, valve, integrals, previous action, held command];
-    ``t`` the step index after this step; ``ref``, ``noise`` the episode values at ``t`` (noise
-    as unit draws).
-    Returns (state, observation list, reward, terminated)."""
-    x, linkage, valve, integral, prev, held = state
+    """One env, one step. ``state`` = [plant state, error integrals, previous action, held
+    command]; ``t`` the step index after this step; ``ref``, ``noise`` the episode values at ``t``
+    (noise as unit draws). Returns (state, observation list, reward, terminated)."""
+    plant, integral, prev, held = state
     cmd = [a0 * task.action_scale, a1 * task.action_scale]
     fault = task.fault
     if fault is not None and t > task.fault_step:
@@ -181,8 +203,7 @@ def scalar_step(task: EngineTask, state: list, a0: float, a1: float, t: int, ref
             cmd[i] = held
         elif fault.kind == "gain_loss":
             cmd[i] = cmd[i] * fault.magnitude
-    x, linkage, valve = step_floats(x, linkage, valve, cmd, task.params, task.rows)
-    y0, y1 = x[-2], x[-1]
+    plant, y0, y1 = task.plant_floats(plant, cmd, t)
     m0, m1 = y0 + noise[0] * task.noise_std[0], y1 + noise[1] * task.noise_std[1]
     if fault is not None and fault.kind == "sensor_bias" and t > task.fault_step:
         if fault.index == 0:
@@ -195,11 +216,11 @@ def scalar_step(task: EngineTask, state: list, a0: float, a1: float, t: int, ref
     i1 = min(max(integral[1] + e1 * task.dt, -lim), lim)
     d0, d1 = a0 - prev[0], a1 - prev[1]
     reward = -task.error_weight * (e0 * e0 + e1 * e1) - task.rate_weight * (d0 * d0 + d1 * d1)
-    terminated = abs(y0) > task.envelope or abs(y1) > task.envelope
+    terminated = abs(y0 - ref[0]) > task.envelope or abs(y1 - ref[1]) > task.envelope
     if terminated:
         reward = reward - task.step_cost_bound * (task.horizon - t + 1)
     obs = [100.0 * m0, 100.0 * m1, 100.0 * ref[0], 100.0 * ref[1], e0, e1, i0, i1, a0, a1]
-    return [x, linkage, valve, [i0, i1], [a0, a1], held], obs, reward, terminated
+    return [plant, [i0, i1], [a0, a1], held], obs, reward, terminated
 
 
 def batch_step(
@@ -207,7 +228,7 @@ def batch_step(
 ):
     """N envs, one step, as :func:`scalar_step` on state-major arrays: acts, ref, noise (2, N),
     t (N,). Returns (state, observations (10, N) float64, rewards (N,), terminated (N,))."""
-    x, linkage, valve, integral, prev, held = state
+    plant, integral, prev, held = state
     cmd = acts * task.action_scale
     fault = task.fault
     if fault is not None:
@@ -217,8 +238,7 @@ def batch_step(
             cmd[i] = np.where(active, held, cmd[i])
         elif fault.kind == "gain_loss":
             cmd[i] = np.where(active, cmd[i] * fault.magnitude, cmd[i])
-    x, linkage, valve = step_arrays(x, linkage, valve, cmd, task.params)
-    y = x[x.shape[0] - 2 :]
+    plant, y = task.plant_arrays(plant, cmd, t)
     m = y + noise * task.noise_std[:, None]
     if fault is not None and fault.kind == "sensor_bias":
         m[fault.index] = np.where(t > task.fault_step, m[fault.index] + fault.magnitude, m[fault.index])
@@ -227,21 +247,21 @@ def batch_step(
     d = acts - prev
     e2, d2 = e * e, d * d
     reward = -task.error_weight * (e2[0] + e2[1]) - task.rate_weight * (d2[0] + d2[1])
-    terminated = (np.abs(y[0]) > task.envelope) | (np.abs(y[1]) > task.envelope)
+    terminated = (np.abs(y[0] - ref[0]) > task.envelope) | (np.abs(y[1] - ref[1]) > task.envelope)
     reward = np.where(terminated, reward - task.step_cost_bound * (task.horizon - t + 1), reward)
     obs = np.concatenate([100.0 * m, 100.0 * ref, e, integral, acts], axis=0)
-    return [x, linkage, valve, integral, acts, held], obs, reward, terminated
+    return [plant, integral, acts, held], obs, reward, terminated
 
 
-def initial_observation(ref: np.ndarray, draws: np.ndarray, noise_std: np.ndarray) -> np.ndarray:
-    """Observations at reset (zero state: the measured outputs are the sensor noise), float32.
-
-    ``ref`` and the unit noise ``draws`` have the channel first: (2,) for one env, (2, N) for N
-    envs; the result is (10,) or (10, N)."""
+def initial_observation(task: EngineTask, ref: np.ndarray, draws: np.ndarray) -> np.ndarray:
+    """Observations at reset, float32: ``ref`` and the unit noise ``draws`` have the channel first,
+    (2,) for one env or (2, N) for N envs; the result is (10,) or (10, N)."""
     ref = np.asarray(ref, dtype=float)
-    noise = np.asarray(draws) * (noise_std if np.ndim(draws) == 1 else noise_std[:, None])
-    zeros = np.zeros_like(noise)
-    obs = np.concatenate([100.0 * noise, 100.0 * ref, 100.0 * (ref - noise), zeros, zeros], axis=0)
+    column = np.ndim(draws) == 1
+    y = task.initial_outputs if column else task.initial_outputs[:, None]
+    m = y + np.asarray(draws) * (task.noise_std if column else task.noise_std[:, None])
+    zeros = np.zeros_like(m)
+    obs = np.concatenate([100.0 * m, 100.0 * ref, 100.0 * (ref - m), zeros, zeros], axis=0)
     return obs.astype(np.float32)
 
 
@@ -304,9 +324,10 @@ class EngineTrackingEnv(gym.Env):
     """
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 25}
+    build_task = staticmethod(EngineTask.build)
 
     def __init__(self, render_mode: str | None = None, **options: Any) -> None:
-        self.task = EngineTask.build(**options)
+        self.task = self.build_task(**options)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(
                 f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}"
@@ -325,9 +346,9 @@ class EngineTrackingEnv(gym.Env):
         refs, noise = self.task.episodes(draws)
         refs, noise = refs[0], noise[0]
         self._refs, self._noise = refs.tolist(), noise.astype(np.float64).tolist()
-        self._state = [[0.0] * self.task.n_states, [0.0, 0.0], [0.0, 0.0], [0.0, 0.0], [0.0, 0.0], 0.0]
+        self._state = [self.task.initial_plant_floats(), [0.0, 0.0], [0.0, 0.0], 0.0]
         self._t = 0
-        obs = np.clip(initial_observation(refs[0], noise[0], self.task.noise_std), self._low, self._high)
+        obs = np.clip(initial_observation(self.task, refs[0], noise[0]), self._low, self._high)
         self._history = [[0.0, 0.0, *refs[0], 0.0, 0.0]] if self.render_mode else []
         return obs, {}
 
@@ -341,7 +362,7 @@ class EngineTrackingEnv(gym.Env):
         )
         self._t = t
         if self.render_mode:
-            valve = self._state[2]
+            valve = self.task.valve_positions(self._state[0])
             self._history.append([obs[0] / 100.0, obs[1] / 100.0, *self._refs[t], valve[0], valve[1]])
             if self.render_mode == "human":
                 self.render()

@@ -15,6 +15,7 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
+from ssme_envs.envs.engine_throttle import ThrottleTask
 from ssme_envs.envs.engine_tracking import EngineTask, batch_step, initial_observation, observation_space
 
 
@@ -27,6 +28,7 @@ class EngineTrackingVectorEnv(VectorEnv):
     """
 
     metadata = {"render_modes": [], "autoreset_mode": AutoresetMode.NEXT_STEP}
+    build_task = staticmethod(EngineTask.build)
 
     def __init__(
         self,
@@ -43,7 +45,7 @@ class EngineTrackingVectorEnv(VectorEnv):
         mode = AutoresetMode(autoreset_mode)
         if mode not in (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP):
             raise ValueError(f"autoreset_mode must be NEXT_STEP or SAME_STEP, got {autoreset_mode!r}")
-        self.task = EngineTask.build(**options)
+        self.task = self.build_task(**options)
         # Episodes are drawn at the task's full length, as the scalar env draws them, whatever
         # the time limit, so that both consume their generators alike.
         self._limit = min(self.task.horizon, max_episode_steps or self.task.horizon)
@@ -66,8 +68,8 @@ class EngineTrackingVectorEnv(VectorEnv):
         self._autoreset = np.zeros(n, dtype=bool)
 
     def _zero_state(self, n: int) -> list:
-        """[x, linkage, valve, error integrals, previous actions, held command] for n envs."""
-        return [np.zeros((self.task.n_states, n)), *(np.zeros((2, n)) for _ in range(4)), np.zeros(n)]
+        """[plant state, error integrals, previous actions, held command] for n envs."""
+        return [self.task.initial_plant_arrays(n), np.zeros((2, n)), np.zeros((2, n)), np.zeros(n)]
 
     def _restart(self, envs: np.ndarray) -> np.ndarray:
         """Zero the state of the given envs and draw their next episodes; their first observations."""
@@ -77,10 +79,13 @@ class EngineTrackingVectorEnv(VectorEnv):
         refs, noise = self.task.episodes(draws)
         self._refs[:, :, envs] = refs.transpose(1, 2, 0)
         self._noise[:, :, envs] = noise.transpose(1, 2, 0)
-        for block in self._state:
-            block[..., envs] = 0.0
+        fresh = self._zero_state(len(envs))
+        for block, new in zip(self._state[0], fresh[0], strict=True):
+            block[..., envs] = new
+        for block, new in zip(self._state[1:], fresh[1:], strict=True):
+            block[..., envs] = new
         self._t[envs] = 0
-        obs = initial_observation(self._refs[0][:, envs], self._noise[0][:, envs], self.task.noise_std).T
+        obs = initial_observation(self.task, self._refs[0][:, envs], self._noise[0][:, envs]).T
         return np.clip(obs, self._low, self._high)
 
     def reset(self, *, seed: int | list[int | None] | None = None, options: dict | None = None):
@@ -136,3 +141,9 @@ class EngineTrackingVectorEnv(VectorEnv):
                     infos["final_obs"][i] = obs[i].copy()
                 obs[done] = self._restart(done)
         return obs, reward, terminated, truncated, infos
+
+
+class EngineThrottleVectorEnv(EngineTrackingVectorEnv):
+    """``num_envs`` copies of :class:`~ssme_envs.envs.engine_throttle.EngineThrottleEnv` as one batch."""
+
+    build_task = staticmethod(ThrottleTask.build_throttle)

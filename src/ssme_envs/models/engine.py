@@ -143,10 +143,8 @@ class StepParameters:
 # u* = v + (lambda - 1)|v|; x_i <- (x_src(i) + sum_j K_ij y_j) + sum_j B_ij u*_j, sums left to right.
 
 
-def step_floats(x: list, linkage: list, valve: list, command: list, p: StepParameters, rows: tuple) -> tuple:
-    """One engine, one sample, on floats; ``rows`` = ``p.floats()``. Returns (x, linkage, valve)."""
-    k_rows, b_rows, lam = rows
-    half, stick = p.half_backlash, p.stiction
+def valves_floats(linkage: list, valve: list, command: list, half: float, stick: float) -> tuple[list, list]:
+    """Backlash then stiction for one engine's valves, on floats. Returns (linkage, valve)."""
     if half:
         linkage = [min(max(lk, c - half), c + half) for lk, c in zip(linkage, command)]
     else:
@@ -155,10 +153,14 @@ def step_floats(x: list, linkage: list, valve: list, command: list, p: StepParam
         valve = [q if abs(q - v) > stick else v for q, v in zip(linkage, valve)]
     else:
         valve = linkage
-    u = [v + g * abs(v) for v, g in zip(valve, lam)]
+    return linkage, valve
+
+
+def dynamics_floats(x: list, u: list, shift_source: tuple, k_rows: list, b_rows: list) -> list:
+    """``x(k+1) = A_o x + K y + B u`` (eq 9) for one engine on floats, ``y`` the last p states."""
     y = x[len(x) - len(k_rows[0]) :]
     x_next = []
-    for source, k_row, b_row in zip(p.shift_source, k_rows, b_rows):
+    for source, k_row, b_row in zip(shift_source, k_rows, b_rows):
         ky = k_row[0] * y[0]
         for k, yj in zip(k_row[1:], y[1:]):
             ky = ky + k * yj
@@ -166,25 +168,29 @@ def step_floats(x: list, linkage: list, valve: list, command: list, p: StepParam
         for b, uj in zip(b_row[1:], u[1:]):
             bu = bu + b * uj
         x_next.append(((x[source] if source >= 0 else 0.0) + ky) + bu)
-    return x_next, linkage, valve
+    return x_next
 
 
-def step_arrays(
-    x: np.ndarray, linkage: np.ndarray, valve: np.ndarray, command: np.ndarray, p: StepParameters
+def step_floats(x: list, linkage: list, valve: list, command: list, p: StepParameters, rows: tuple) -> tuple:
+    """One engine, one sample, on floats; ``rows`` = ``p.floats()``. Returns (x, linkage, valve)."""
+    k_rows, b_rows, lam = rows
+    linkage, valve = valves_floats(linkage, valve, command, p.half_backlash, p.stiction)
+    u = [v + g * abs(v) for v, g in zip(valve, lam)]
+    return dynamics_floats(x, u, p.shift_source, k_rows, b_rows), linkage, valve
+
+
+def valves_arrays(linkage: np.ndarray, valve: np.ndarray, command: np.ndarray, half: float, stick: float):
+    """Backlash then stiction for N engines' valves, (m, N) arrays. Returns (linkage, valve)."""
+    linkage = np.clip(linkage, command - half, command + half) if half else command
+    valve = np.where(np.abs(linkage - valve) > stick, linkage, valve) if stick else linkage
+    return linkage, valve
+
+
+def dynamics_arrays(
+    x: np.ndarray, u: np.ndarray, shift_source: tuple, k_gain: np.ndarray, b_gain: np.ndarray
 ):
-    """N engines, one sample, state-major: x (n, N), linkage, valve, command (m, N). Returns
-    (x, linkage, valve). Rows are contiguous, so every operation runs over N engines at once."""
-    if p.half_backlash:
-        linkage = np.clip(linkage, command - p.half_backlash, command + p.half_backlash)
-    else:
-        linkage = command
-    if p.stiction:
-        valve = np.where(np.abs(linkage - valve) > p.stiction, linkage, valve)
-    else:
-        valve = linkage
-    lam = p.lam_minus_one
-    u = valve + (lam[:, None] if lam.ndim == 1 else lam) * np.abs(valve)
-    k_gain, b_gain = p.K, p.B  # (n, p) and (n, m), or (n, p, N) and (n, m, N): one model per engine
+    """``x(k+1) = A_o x + K y + B u`` for N engines, state-major x (n, N), u (m, N); K (n, p) and
+    B (n, m), or (n, p, N) and (n, m, N) for one model per engine."""
     n_out = k_gain.shape[1]
     y = x[x.shape[0] - n_out :]
     ky = _column(k_gain, 0) * y[0]
@@ -194,10 +200,21 @@ def step_arrays(
     for j in range(1, b_gain.shape[1]):
         bu = bu + _column(b_gain, j) * u[j]
     shifted = np.zeros_like(ky)
-    for i, source in enumerate(p.shift_source):
+    for i, source in enumerate(shift_source):
         if source >= 0:
             shifted[i] = x[source]
-    return (shifted + ky) + bu, linkage, valve
+    return (shifted + ky) + bu
+
+
+def step_arrays(
+    x: np.ndarray, linkage: np.ndarray, valve: np.ndarray, command: np.ndarray, p: StepParameters
+):
+    """N engines, one sample, state-major: x (n, N), linkage, valve, command (m, N). Returns
+    (x, linkage, valve). Rows are contiguous, so every operation runs over N engines at once."""
+    linkage, valve = valves_arrays(linkage, valve, command, p.half_backlash, p.stiction)
+    lam = p.lam_minus_one
+    u = valve + (lam[:, None] if lam.ndim == 1 else lam) * np.abs(valve)
+    return dynamics_arrays(x, u, p.shift_source, p.K, p.B), linkage, valve
 
 
 def _column(gain: np.ndarray, j: int) -> np.ndarray:

@@ -1,0 +1,188 @@
+"""The SSME over the mission throttle profile, on the linked full-range model."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ssme_envs.envs.engine_tracking import EngineTask, EngineTrackingEnv, resolve_truth
+from ssme_envs.envs.references import Fault
+from ssme_envs.models.engine import (
+    ENGINE_DT,
+    TruthConfig,
+    dynamics_arrays,
+    dynamics_floats,
+    valves_arrays,
+    valves_floats,
+)
+from ssme_envs.models.linked import POWER_RANGE, LinkedEngineModel
+
+# The mission profile of the paper's figure 2, compressed in time (the flight spends about
+# 520 s; here 60 s): 100 %, up to 104 %, the 65-72 % bucket through max-q, back to 104 %, and the
+# 3 g throttle-down as propellant is used. (time s, power %) breakpoints, linear in between.
+MISSION_PROFILE: tuple[tuple[float, float], ...] = (
+    (0.0, 100.0), (3.0, 100.0), (5.0, 104.0), (15.0, 104.0), (19.0, 67.0), (29.0, 67.0),
+    (33.0, 104.0), (45.0, 104.0), (60.0, 67.0),
+)  # fmt: skip
+
+
+def power_profile(profile: Sequence[tuple[float, float]], dt: float) -> np.ndarray:
+    """Commanded power per sample, % (piecewise linear through the breakpoints)."""
+    points = np.asarray(profile, dtype=float)
+    if points.ndim != 2 or points.shape[1] != 2 or points.shape[0] < 2:
+        raise ValueError("profile must be a list of at least two (time s, power %) pairs")
+    if not np.all(np.isfinite(points)) or points[0, 0] != 0.0 or np.any(np.diff(points[:, 0]) <= 0):
+        raise ValueError("profile times must start at 0 and increase")
+    if points[:, 1].min() < POWER_RANGE[0] or points[:, 1].max() > POWER_RANGE[1]:
+        raise ValueError(f"profile power must stay within {POWER_RANGE[0]:g}-{POWER_RANGE[1]:g} %")
+    t = np.arange(round(points[-1, 0] / dt) + 1) * dt
+    return np.interp(t, points[:, 0], points[:, 1])
+
+
+@dataclass(frozen=True)
+class ThrottleTask(EngineTask):
+    """An engine task whose plant is the linked model scheduled on the commanded power P(t):
+
+    ``x(k+1) = A(P) x + B(P) u* + (I - A(P)) C^T c(P)``, ``y = C x``, with
+    ``c(P) = y_eq(P) - G(P) u_eq(P)`` and ``u* = u + (lambda(P) - 1) |u - u_eq(P)|``. At a fixed
+    power this is the local point model about its operating point; on the nominal schedule
+    ``u = u_eq(P)`` its equilibrium output is ``y_eq(P)`` at every power.
+    """
+
+    power: np.ndarray = field(default=None)  # commanded power per step, %
+    nominal_valves: np.ndarray = field(default=None)  # (T + 1, 2)
+    nominal_outputs: np.ndarray = field(default=None)  # (T + 1, 2), the references
+    k_table: np.ndarray = field(default=None)  # (T + 1, n, p)
+    b_table: np.ndarray = field(default=None)  # (T + 1, n, m)
+    lam_table: np.ndarray = field(default=None)  # (T + 1, m), lambda - 1 (zero without the gains)
+    offset_table: np.ndarray = field(default=None)  # (T + 1, n), (I - A) C^T c(P)
+    x_start: np.ndarray = field(default=None)  # (n,), the equilibrium at P(0) on the schedule
+    tables: tuple = field(default=None, repr=False)  # the tables as float lists, for the scalar step
+
+    @classmethod
+    def build_throttle(
+        cls,
+        profile: Sequence[tuple[float, float]] = MISSION_PROFILE,
+        truth: TruthConfig | Mapping[str, Any] | None = None,
+        fault: Mapping[str, Any] | Fault | None = None,
+        action_scale: float = 0.02,
+    ) -> ThrottleTask:
+        base = EngineTask.build(truth=truth, fault=fault, action_scale=action_scale, reference="zero")
+        config = resolve_truth(truth)
+        linked = LinkedEngineModel()
+        power = power_profile(profile, ENGINE_DT)
+        k, b, lam = linked.parameters(power)
+        lam_minus_one = lam - 1.0 if config.asymmetric_gains else np.zeros_like(lam)
+        u_nom, y_nom = linked.nominal_valves(power), linked.nominal_outputs(power)
+        structure = linked.template.structure
+        c = structure.output_matrix()
+        a = structure.shift_matrix() + k @ c
+        eye = np.eye(a.shape[-1])
+        gain = c @ np.linalg.solve(eye - a, b)
+        offset_out = y_nom - (gain @ u_nom[..., None])[..., 0]
+        offset = ((eye - a) @ c.T @ offset_out[..., None])[..., 0]
+        x_start = np.linalg.solve(eye - a[0], b[0] @ u_nom[0] + offset[0])
+        fields = {name: getattr(base, name) for name, spec in base.__dataclass_fields__.items() if spec.init}
+        fields.update(horizon=power.size - 1, reference="throttle")
+        return cls(
+            **fields,
+            power=power,
+            nominal_valves=u_nom,
+            nominal_outputs=y_nom,
+            k_table=k,
+            b_table=b,
+            lam_table=lam_minus_one,
+            offset_table=offset,
+            x_start=x_start,
+            tables=(k.tolist(), b.tolist(), lam_minus_one.tolist(), u_nom.tolist(), offset.tolist()),
+        )
+
+    @property
+    def draw_size(self) -> int:
+        return 2 * (self.horizon + 1)
+
+    def episodes(self, draws: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        k, length = draws.shape[0], self.horizon + 1
+        return np.broadcast_to(self.nominal_outputs, (k, length, 2)).copy(), draws.reshape(k, length, 2)
+
+    # Plant state: [x (n), linkage (m), valve (m)], starting at the schedule's equilibrium. The
+    # command of step t - 1 -> t acts about the schedule at t - 1, with that step's parameters.
+    @property
+    def initial_outputs(self) -> np.ndarray:
+        return self.x_start[self.n_states - 2 :].copy()
+
+    def initial_plant_floats(self) -> list:
+        u0 = self.nominal_valves[0].tolist()
+        return [self.x_start.tolist(), list(u0), list(u0)]
+
+    def initial_plant_arrays(self, n: int) -> list:
+        u0 = np.repeat(self.nominal_valves[0][:, None], n, axis=1)
+        return [np.repeat(self.x_start[:, None], n, axis=1), u0, u0.copy()]
+
+    def plant_floats(self, plant: list, cmd: list, t: int) -> tuple[list, float, float]:
+        x, linkage, valve = plant
+        k_rows, b_rows, lam, u_nom, offset = (table[t - 1] for table in self.tables)
+        command = [u_nom[0] + cmd[0], u_nom[1] + cmd[1]]
+        linkage, valve = valves_floats(
+            linkage, valve, command, self.params.half_backlash, self.params.stiction
+        )
+        u_star = [v + g * abs(v - un) for v, g, un in zip(valve, lam, u_nom)]
+        x = [
+            xi + oi
+            for xi, oi in zip(dynamics_floats(x, u_star, self.params.shift_source, k_rows, b_rows), offset)
+        ]
+        return [x, linkage, valve], x[-2], x[-1]
+
+    def plant_arrays(self, plant: list, cmd: np.ndarray, t: np.ndarray) -> tuple[list, np.ndarray]:
+        x, linkage, valve = plant
+        s = t - 1
+        if (s == s[0]).all():
+            k, b = self.k_table[s[0]], self.b_table[s[0]]
+            lam, u_nom, offset = (
+                self.lam_table[s[0], :, None],
+                self.nominal_valves[s[0], :, None],
+                self.offset_table[s[0], :, None],
+            )
+        else:
+            k, b = self.k_table[s].transpose(1, 2, 0), self.b_table[s].transpose(1, 2, 0)
+            lam, u_nom, offset = self.lam_table[s].T, self.nominal_valves[s].T, self.offset_table[s].T
+        linkage, valve = valves_arrays(
+            linkage, valve, u_nom + cmd, self.params.half_backlash, self.params.stiction
+        )
+        u_star = valve + lam * np.abs(valve - u_nom)
+        x = dynamics_arrays(x, u_star, self.params.shift_source, k, b) + offset
+        return [x, linkage, valve], x[x.shape[0] - 2 :]
+
+
+class EngineThrottleEnv(EngineTrackingEnv):
+    """Fly the SSME through the mission throttle profile, tracking chamber pressure and mixture ratio.
+
+    The plant is the full-range engine: the five Table I point models of NASA TM-104422 linked
+    over 65-109 % power (:mod:`ssme_envs.models.linked`), in velocity form and scheduled on the
+    commanded power, with the lambda gains, valve backlash and stiction, and sensor noise of
+    the truth. Outputs are normalized deviations from the 100 % point (d Pc = 0.01 per % of
+    power); the references follow the profile: Pc = P/100 - 1, MR held at nominal.
+
+    ## Action Space
+    ``Box(-1, 1, (2,), float32)``: corrections to the nominal valve schedule. The valve commands
+    are ``u_eq(P(t)) + action * action_scale`` (default 0.02 normalized valve travel), where
+    ``u_eq`` is the schedule consistent with the point models' DC gains: zero action flies the
+    profile open loop. Out-of-range actions are clipped; NaN or inf raises ValueError.
+
+    ## Observation Space, Rewards
+    As in ``EngineTracking-v0`` (10 values: measured Pc and MR, references, errors, error
+    integrals, previous action; errors in % of the 100 % values). An episode terminates when a
+    tracking error exceeds 10 %, with a penalty larger than the cost of all remaining steps.
+
+    ## Episode End
+    Truncation at the end of the profile (default: the time-compressed mission, 60 s, 1500 steps).
+
+    ## Arguments
+    profile : list of (time s, power %) breakpoints within 65-109 % (default: the mission).
+    truth, fault, action_scale, render_mode : as in ``EngineTracking-v0``.
+    """
+
+    build_task = staticmethod(ThrottleTask.build_throttle)
