@@ -104,6 +104,16 @@ def build_parser() -> argparse.ArgumentParser:
         help="the A that fixes the Table 1 form (default: %(default)s)",
     )
 
+    bench = commands.add_parser(
+        "bench", help="environment steps per second beside Pendulum-v1 and CartPole-v1 (ratios)"
+    )
+    bench.add_argument(
+        "--seconds", type=float, default=2.0, help="time per measurement (default: %(default)s)"
+    )
+    bench.add_argument("--sizes", default="1,64,1024,4096", help="vector sizes (default: %(default)s)")
+    bench.add_argument("--env", action="append", help="env id to measure (repeatable; default: all)")
+    bench.add_argument("--out", type=Path, help="also write the table to this markdown file")
+
     check = commands.add_parser("validate", help="validate a model.json on input/output records")
     check_plants = check.add_subparsers(dest="plant", required=True, parser_class=_Parser)
     check_engine = check_plants.add_parser(
@@ -242,6 +252,29 @@ def _identify_nozzle(args: argparse.Namespace) -> int:
     return 0
 
 
+def _bench(args: argparse.Namespace) -> int:
+    from ssme_envs.bench import ENV_IDS, format_table, run_benchmark
+
+    try:
+        sizes = [int(v) for v in args.sizes.split(",")]
+    except ValueError:
+        raise _UsageError(f"--sizes must be comma-separated positive integers, got {args.sizes!r}") from None
+    if any(n < 1 for n in sizes):
+        raise _UsageError(f"--sizes must be positive integers, got {args.sizes!r}")
+    if not 0 < args.seconds <= 60:
+        raise _UsageError(f"--seconds must be within (0, 60], got {args.seconds}")
+    env_ids = args.env or list(ENV_IDS)
+    unknown = [e for e in env_ids if e not in ENV_IDS]
+    if unknown:
+        raise _UsageError(f"unknown env {', '.join(unknown)}; choose from {', '.join(ENV_IDS)}")
+    rows = run_benchmark(env_ids, sizes, args.seconds, progress=lambda m: print(m, file=sys.stderr))
+    table = format_table(rows)
+    print(table)
+    if args.out is not None:
+        args.out.write_text("Command: `ssme-envs bench`\n\n" + table + "\n")
+    return 0
+
+
 def _validate_engine(args: argparse.Namespace) -> int:
     from ssme_envs.identification import pipeline, report
     from ssme_envs.identification.metrics import validate
@@ -278,6 +311,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _identify_engine(args)
         if args.command == "identify" and args.plant == "nozzle":
             return _identify_nozzle(args)
+        if args.command == "bench":
+            return _bench(args)
         if args.command == "validate" and args.plant == "engine":
             return _validate_engine(args)
     except (_UsageError, ValueError) as exc:

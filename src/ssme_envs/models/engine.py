@@ -159,6 +159,13 @@ def valves_floats(linkage: list, valve: list, command: list, half: float, stick:
 def dynamics_floats(x: list, u: list, shift_source: tuple, k_rows: list, b_rows: list) -> list:
     """``x(k+1) = A_o x + K y + B u`` (eq 9) for one engine on floats, ``y`` the last p states."""
     y = x[len(x) - len(k_rows[0]) :]
+    if len(y) == 2 and len(u) == 2:  # the SSME's two outputs and two valves, unrolled, same order
+        y0, y1 = y
+        u0, u1 = u
+        return [
+            ((x[source] if source >= 0 else 0.0) + (k0 * y0 + k1 * y1)) + (b0 * u0 + b1 * u1)
+            for source, (k0, k1), (b0, b1) in zip(shift_source, k_rows, b_rows)
+        ]
     x_next = []
     for source, k_row, b_row in zip(shift_source, k_rows, b_rows):
         ky = k_row[0] * y[0]
