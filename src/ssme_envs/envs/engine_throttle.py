@@ -104,6 +104,10 @@ class ThrottleTask(EngineTask):
     def draw_size(self) -> int:
         return 2 * (self.horizon + 1)
 
+    @property
+    def shared_references(self) -> np.ndarray:
+        return self.nominal_outputs
+
     def episodes(self, draws: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         k, length = draws.shape[0], self.horizon + 1
         return np.broadcast_to(self.nominal_outputs, (k, length, 2)).copy(), draws.reshape(k, length, 2)

@@ -138,6 +138,11 @@ class EngineTask:
             self, "fault_step", round(self.fault.time / self.dt) if self.fault is not None else -1
         )
 
+    @property
+    def shared_references(self) -> np.ndarray | None:
+        """References common to every episode, (horizon + 1, 2), or None when drawn per episode."""
+        return None
+
     # The plant: point model with valves (this class) or the linked model (the throttle task).
     @property
     def initial_outputs(self) -> np.ndarray:

@@ -60,7 +60,9 @@ class EngineTrackingVectorEnv(VectorEnv):
         n, t1 = num_envs, self.task.horizon + 1
         self._rngs: list[np.random.Generator] = [seeding.np_random(None)[0] for _ in range(n)]
         # episode data time-major, (T + 1, 2, N): one step's values for all envs are contiguous
-        self._refs = np.zeros((t1, 2, n))
+        # references shared by every episode (the throttle profile) are not copied per env
+        self._shared_refs = self.task.shared_references
+        self._refs = None if self._shared_refs is not None else np.zeros((t1, 2, n))
         self._noise = np.zeros((t1, 2, n), dtype=np.float32)  # unit draws, scaled at each step
         self._t = np.zeros(n, dtype=np.int64)
         self._rows = np.arange(n)
@@ -78,7 +80,8 @@ class EngineTrackingVectorEnv(VectorEnv):
             self._rngs[i].standard_normal(out=draws[row], dtype=np.float32)
         refs, noise = self.task.episodes(draws)
         cols = slice(None) if len(envs) == self.num_envs else envs  # all envs: a plain (faster) copy
-        self._refs[:, :, cols] = refs.transpose(1, 2, 0)
+        if self._refs is not None:
+            self._refs[:, :, cols] = refs.transpose(1, 2, 0)
         self._noise[:, :, cols] = noise.transpose(1, 2, 0)
         fresh = self._zero_state(len(envs))
         for block, new in zip(self._state[0], fresh[0], strict=True):
@@ -86,7 +89,8 @@ class EngineTrackingVectorEnv(VectorEnv):
         for block, new in zip(self._state[1:], fresh[1:], strict=True):
             block[..., envs] = new
         self._t[envs] = 0
-        obs = initial_observation(self.task, self._refs[0][:, envs], self._noise[0][:, envs]).T
+        first_refs = refs[:, 0].T  # (2, k)
+        obs = initial_observation(self.task, first_refs, self._noise[0][:, envs]).T
         return np.clip(obs, self._low, self._high)
 
     def reset(self, *, seed: int | list[int | None] | None = None, options: dict | None = None):
@@ -115,9 +119,15 @@ class EngineTrackingVectorEnv(VectorEnv):
         task = self.task
         t = np.minimum(self._t + 1, task.horizon)
         if (t == t[0]).all():  # envs in step: contiguous slices
-            refs, noise = self._refs[t[0]], self._noise[t[0]]
+            noise = self._noise[t[0]]
+            refs = (
+                self._refs[t[0]]
+                if self._refs is not None
+                else np.repeat(self._shared_refs[t[0], :, None], self.num_envs, axis=1)
+            )
         else:
-            refs, noise = self._refs[t, :, self._rows].T, self._noise[t, :, self._rows].T
+            noise = self._noise[t, :, self._rows].T
+            refs = self._shared_refs[t].T if self._refs is None else self._refs[t, :, self._rows].T
         self._state, obs, reward, terminated = batch_step(task, self._state, acts, t, refs, noise)
         self._t = t
         obs = np.clip(obs.T.astype(np.float32), self._low, self._high)
