@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -400,14 +400,6 @@ class EngineTrackingEnv(gym.Env):
 
             close_figure(self._figure)
             self._figure = None
-
-    def describe(self) -> dict[str, Any]:
-        """The task's settings, for logs and reports."""
-        return {
-            k: (v.tolist() if isinstance(v, np.ndarray) else v)
-            for k, v in asdict(self.task).items()
-            if k != "params"
-        }
 
 
 __all__ = ["EngineTask", "EngineTrackingEnv", "batch_step", "initial_observation", "scalar_step"]
