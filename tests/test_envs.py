@@ -164,8 +164,17 @@ def test_bad_actions_and_options():
     env.reset(seed=0)
     with pytest.raises(ValueError, match="action must be finite"):
         env.step(np.array([np.nan, 0.0], np.float32))
+    for bad_shape in ([1.0], [1.0, 2.0, 3.0], "ab"):
+        with pytest.raises(ValueError, match="action must be 2 numbers"):
+            env.step(bad_shape)
     obs, *_ = env.step(np.array([5.0, -7.0], np.float32))
     assert obs[8:].tolist() == [1.0, -1.0]  # clipped, and reported as applied
+    raw = gym.make(TRACKING, episode_seconds=1.0).unwrapped
+    raw.reset(seed=0)
+    for _ in range(25):
+        raw.step(np.zeros(2, np.float32))
+    with pytest.raises(ValueError, match="call reset"):
+        raw.step(np.zeros(2, np.float32))
     venv = gym.make_vec(TRACKING, num_envs=3, vectorization_mode="vector_entry_point")
     venv.reset(seed=0)
     bad = np.zeros((3, 2), np.float32)

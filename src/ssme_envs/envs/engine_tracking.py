@@ -361,8 +361,15 @@ class EngineTrackingEnv(gym.Env):
         return obs, {}
 
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict]:
-        a0, a1 = float(action[0]), float(action[1])
+        try:
+            if len(action) != 2:
+                raise ValueError
+            a0, a1 = float(action[0]), float(action[1])
+        except (TypeError, ValueError, IndexError):
+            raise ValueError(f"action must be 2 numbers (OPOV, FPOV), got {action!r}") from None
         check_action_values(a0, a1)
+        if self._t >= self.task.horizon:
+            raise ValueError("the episode is over (truncated): call reset() before step()")
         a0, a1 = min(max(a0, -1.0), 1.0), min(max(a1, -1.0), 1.0)
         t = self._t + 1
         self._state, obs, reward, terminated = scalar_step(
