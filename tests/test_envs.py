@@ -46,6 +46,8 @@ def _compare(env_id, num_envs, steps, seed, action_scale_up, mode=AutoresetMode.
         for name, x, y in zip(("obs", "reward", "terminated", "truncated"), ra[:4], rb[:4], strict=True):
             assert np.array_equal(x, y), f"{name} differs at step {k}"
         if mode == AutoresetMode.SAME_STEP and (ra[2] | ra[3]).any():
+            assert sorted(ra[4]) == sorted(rb[4])
+            np.testing.assert_array_equal(ra[4]["_final_obs"], rb[4]["_final_obs"])
             for i in np.flatnonzero(ra[2] | ra[3]):
                 np.testing.assert_array_equal(ra[4]["final_obs"][i], rb[4]["final_obs"][i])
         ends += int((ra[2] | ra[3]).sum())
@@ -197,6 +199,37 @@ def test_bad_actions_and_options():
             gym.make(TRACKING, **kwargs)
     with pytest.raises(ValueError, match="profile power must stay within"):
         gym.make(THROTTLE, profile=[(0.0, 100.0), (5.0, 120.0)])
+    for kwargs, message in [
+        ({"profile": [(0.0, 100.0), (0.01, 100.0)]}, "shorter than one"),
+        ({"fault": {"kind": "stuck_valve", "time": 100.0}}, "beyond the episode"),
+        ({"fault": {"kind": "sensor_bias", "time": 1.0, "magnitude": 1.0}}, "within \\+-0.05"),
+        ({"fault": {"kind": "gain_loss", "time": 1.0, "magnitude": 3.0}}, "within 0-1"),
+        ({"truth": {"backlash": "a"}}, "backlash"),
+        ({"truth": {"asymmetric_gains": "no"}}, "asymmetric_gains"),
+        ({"truth": {"sensor_noise": [1e-4, 1e-4, 1e-4]}}, "sensor_noise"),
+    ]:
+        with pytest.raises(ValueError, match=message):
+            gym.make(THROTTLE, **kwargs)
+    with pytest.raises(ValueError, match="max_episode_steps must be a positive integer"):
+        gym.make_vec(TRACKING, num_envs=2, vectorization_mode="vector_entry_point", max_episode_steps=0)
+
+
+def test_faults_act_as_documented():
+    stuck = gym.make(
+        THROTTLE, truth={"sensor_noise": 0.0}, fault={"kind": "stuck_valve", "time": 4.0, "index": 0}
+    )
+    stuck.reset(seed=0)
+    positions = []
+    for _ in range(600):
+        stuck.step(np.zeros(2, np.float32))
+        plant = stuck.unwrapped._state[0]
+        positions.append(stuck.unwrapped.task.valve_positions(plant))
+    positions = np.array(positions)
+    assert np.ptp(positions[100:, 0]) == 0.0 and np.ptp(positions[100:, 1]) > 0.1  # OPOV held, FPOV follows
+    biased = gym.make(TRACKING, truth={"sensor_noise": 0.0}, reference="zero",
+                      fault={"kind": "sensor_bias", "time": 0.0, "index": 0, "magnitude": 0.01})  # fmt: skip
+    obs, _ = biased.reset(seed=0)
+    assert obs[:2].tolist() == [1.0, 0.0]  # the bias is there from the first measurement
 
 
 def test_plant_from_a_model_file_and_malformed_file(tmp_path):

@@ -58,7 +58,7 @@ class ThrottleTask(EngineTask):
     k_table: np.ndarray = field(default=None)  # (T + 1, n, p)
     b_table: np.ndarray = field(default=None)  # (T + 1, n, m)
     lam_table: np.ndarray = field(default=None)  # (T + 1, m), lambda - 1 (zero without the gains)
-    offset_table: np.ndarray = field(default=None)  # (T + 1, n), (I - A) C^T c(P)
+    state_offsets: np.ndarray = field(default=None)  # (T + 1, n), (I - A) C^T c(P)
     x_start: np.ndarray = field(default=None)  # (n,), the equilibrium at P(0) on the schedule
     tables: tuple = field(default=None, repr=False)  # the tables as float lists, for the scalar step
 
@@ -70,10 +70,18 @@ class ThrottleTask(EngineTask):
         fault: Mapping[str, Any] | Fault | None = None,
         action_scale: float = 0.02,
     ) -> ThrottleTask:
-        base = EngineTask.build(truth=truth, fault=fault, action_scale=action_scale, reference="zero")
+        power = power_profile(profile, ENGINE_DT)
+        if power.size < 2:
+            raise ValueError("the profile is shorter than one 0.04 s step")
+        base = EngineTask.build(
+            truth=truth,
+            fault=fault,
+            action_scale=action_scale,
+            reference="zero",
+            episode_seconds=max(1.0, (power.size - 1) * ENGINE_DT),
+        )
         config = resolve_truth(truth)
         linked = LinkedEngineModel()
-        power = power_profile(profile, ENGINE_DT)
         k, b, lam = linked.parameters(power)
         lam_minus_one = lam - 1.0 if config.asymmetric_gains else np.zeros_like(lam)
         u_nom, y_nom = linked.nominal_valves(power), linked.nominal_outputs(power)
@@ -86,7 +94,7 @@ class ThrottleTask(EngineTask):
         offset = ((eye - a) @ c.T @ offset_out[..., None])[..., 0]
         x_start = np.linalg.solve(eye - a[0], b[0] @ u_nom[0] + offset[0])
         fields = {name: getattr(base, name) for name, spec in base.__dataclass_fields__.items() if spec.init}
-        fields.update(horizon=power.size - 1, reference="throttle")
+        fields.update(horizon=power.size - 1, reference="throttle", offset_table=u_nom)
         return cls(
             **fields,
             power=power,
@@ -95,7 +103,7 @@ class ThrottleTask(EngineTask):
             k_table=k,
             b_table=b,
             lam_table=lam_minus_one,
-            offset_table=offset,
+            state_offsets=offset,
             x_start=x_start,
             tables=(k.tolist(), b.tolist(), lam_minus_one.tolist(), u_nom.tolist(), offset.tolist()),
         )
@@ -113,7 +121,8 @@ class ThrottleTask(EngineTask):
         return np.broadcast_to(self.nominal_outputs, (k, length, 2)).copy(), draws.reshape(k, length, 2)
 
     # Plant state: [x (n), linkage (m), valve (m)], starting at the schedule's equilibrium. The
-    # command of step t - 1 -> t acts about the schedule at t - 1, with that step's parameters.
+    # command of step t - 1 -> t is absolute (the schedule at t - 1 plus the action, faults
+    # applied) and acts with that step's parameters.
     @property
     def initial_outputs(self) -> np.ndarray:
         return self.x_start[self.n_states - 2 :].copy()
@@ -129,10 +138,7 @@ class ThrottleTask(EngineTask):
     def plant_floats(self, plant: list, cmd: list, t: int) -> tuple[list, float, float]:
         x, linkage, valve = plant
         k_rows, b_rows, lam, u_nom, offset = (table[t - 1] for table in self.tables)
-        command = [u_nom[0] + cmd[0], u_nom[1] + cmd[1]]
-        linkage, valve = valves_floats(
-            linkage, valve, command, self.params.half_backlash, self.params.stiction
-        )
+        linkage, valve = valves_floats(linkage, valve, cmd, self.params.half_backlash, self.params.stiction)
         u_star = [v + g * abs(v - un) for v, g, un in zip(valve, lam, u_nom)]
         x = [
             xi + oi
@@ -148,14 +154,12 @@ class ThrottleTask(EngineTask):
             lam, u_nom, offset = (
                 self.lam_table[s[0], :, None],
                 self.nominal_valves[s[0], :, None],
-                self.offset_table[s[0], :, None],
+                self.state_offsets[s[0], :, None],
             )
         else:
             k, b = self.k_table[s].transpose(1, 2, 0), self.b_table[s].transpose(1, 2, 0)
-            lam, u_nom, offset = self.lam_table[s].T, self.nominal_valves[s].T, self.offset_table[s].T
-        linkage, valve = valves_arrays(
-            linkage, valve, u_nom + cmd, self.params.half_backlash, self.params.stiction
-        )
+            lam, u_nom, offset = self.lam_table[s].T, self.nominal_valves[s].T, self.state_offsets[s].T
+        linkage, valve = valves_arrays(linkage, valve, cmd, self.params.half_backlash, self.params.stiction)
         u_star = valve + lam * np.abs(valve - u_nom)
         x = dynamics_arrays(x, u_star, self.params.shift_source, k, b) + offset
         return [x, linkage, valve], x[x.shape[0] - 2 :]
@@ -165,7 +169,7 @@ class EngineThrottleEnv(EngineTrackingEnv):
     """Fly the SSME through the mission throttle profile, tracking chamber pressure and mixture ratio.
 
     The plant is the full-range engine: the five Table I point models of NASA TM-104422 linked
-    over 65-109 % power (:mod:`ssme_envs.models.linked`), in velocity form and scheduled on the
+    over 65-109 % power (:mod:`ssme_envs.models.linked`), with operating-point offsets, scheduled on the
     commanded power, with the lambda gains, valve backlash and stiction, and sensor noise of
     the truth. Outputs are normalized deviations from the 100 % point (d Pc = 0.01 per % of
     power); the references follow the profile: Pc = P/100 - 1, MR held at nominal.
@@ -183,6 +187,9 @@ class EngineThrottleEnv(EngineTrackingEnv):
 
     ## Episode End
     Truncation at the end of the profile (default: the time-compressed mission, 60 s, 1500 steps).
+    ``gymnasium.make`` also applies the registered limit of 1500 steps: for a longer profile pass
+    ``max_episode_steps`` too. Faults act on the absolute valve commands (a stuck valve holds its
+    position whatever the schedule).
 
     ## Arguments
     profile : list of (time s, power %) breakpoints within 65-109 % (default: the mission).

@@ -83,6 +83,8 @@ class EngineTask:
     integral_limit: float = 100.0  # % s, anti-windup bound of the error integrals
     rows: tuple = field(init=False, repr=False)  # K, B, lambda - 1 as floats, for the scalar step
     noise_scale: tuple = field(init=False, repr=False)  # noise_std as floats, for the scalar step
+    offset_table: np.ndarray | None = field(default=None, repr=False)  # (T + 1, m) added to commands
+    command_offsets: list | None = field(init=False, repr=False)  # offset_table as floats
     fault_step: int = field(init=False)  # the step after which the fault acts (-1: none)
 
     @classmethod
@@ -107,7 +109,12 @@ class EngineTask:
         config = resolve_truth(truth)
         if reference not in REFERENCE_KINDS:
             raise ValueError(f"unknown reference {reference!r}; choose one of {', '.join(REFERENCE_KINDS)}")
-        amplitude = np.broadcast_to(np.asarray(reference_amplitude, dtype=float), (2,)).copy()
+        try:
+            amplitude = np.broadcast_to(np.asarray(reference_amplitude, dtype=float), (2,)).copy()
+        except (TypeError, ValueError):
+            raise ValueError(
+                f"reference_amplitude must be one number or two, got {reference_amplitude!r}"
+            ) from None
         if not np.all(np.isfinite(amplitude)) or np.any(amplitude < 0) or np.any(amplitude > 0.05):
             raise ValueError(
                 f"reference_amplitude must be within 0-0.05 (normalized), got {reference_amplitude!r}"
@@ -118,7 +125,12 @@ class EngineTask:
             raise ValueError(
                 f"action_scale must be within (0, 0.2] normalized valve travel, got {action_scale!r}"
             )
-        noise = np.broadcast_to(np.atleast_1d(np.asarray(config.sensor_noise, dtype=float)), (2,)).copy()
+        try:
+            noise = np.broadcast_to(np.atleast_1d(np.asarray(config.sensor_noise, dtype=float)), (2,)).copy()
+        except ValueError:
+            raise ValueError(
+                f"truth sensor_noise must be one number or two, got {config.sensor_noise!r}"
+            ) from None
         return cls(
             params=StepParameters.from_model(model, config),
             n_states=model.A.shape[0],
@@ -134,9 +146,15 @@ class EngineTask:
     def __post_init__(self) -> None:
         object.__setattr__(self, "rows", self.params.floats())
         object.__setattr__(self, "noise_scale", tuple(self.noise_std.tolist()))
+        offsets = None if self.offset_table is None else self.offset_table.tolist()
+        object.__setattr__(self, "command_offsets", offsets)
         object.__setattr__(
             self, "fault_step", round(self.fault.time / self.dt) if self.fault is not None else -1
         )
+        if self.fault is not None and self.fault_step >= self.horizon:
+            raise ValueError(
+                f"fault time {self.fault.time:g} s is beyond the episode ({self.horizon * self.dt:g} s)"
+            )
 
     @property
     def shared_references(self) -> np.ndarray | None:
@@ -169,7 +187,10 @@ class EngineTask:
     @property
     def step_cost_bound(self) -> float:
         """Largest reward loss of one step inside the envelope (errors and valve rates at their bounds)."""
-        error = 100.0 * (self.envelope + float(self.amplitude.max())) + 50.0
+        bias = (
+            abs(self.fault.magnitude) if self.fault is not None and self.fault.kind == "sensor_bias" else 0.0
+        )
+        error = 100.0 * (self.envelope + float(self.amplitude.max()) + bias) + 50.0
         return self.error_weight * 2 * error**2 + self.rate_weight * 2 * 2.0**2
 
     @property
@@ -201,6 +222,9 @@ def scalar_step(task: EngineTask, state: list, a0: float, a1: float, t: int, ref
     (noise as unit draws). Returns (state, observation list, reward, terminated)."""
     plant, integral, prev, held = state
     cmd = [a0 * task.action_scale, a1 * task.action_scale]
+    if task.command_offsets is not None:  # the throttle's nominal valve schedule
+        nominal = task.command_offsets[t - 1]
+        cmd = [nominal[0] + cmd[0], nominal[1] + cmd[1]]
     fault = task.fault
     if fault is not None and t > task.fault_step:
         i = fault.index
@@ -213,7 +237,7 @@ def scalar_step(task: EngineTask, state: list, a0: float, a1: float, t: int, ref
     plant, y0, y1 = task.plant_floats(plant, cmd, t)
     s0, s1 = task.noise_scale
     m0, m1 = y0 + noise[0] * s0, y1 + noise[1] * s1
-    if fault is not None and fault.kind == "sensor_bias" and t > task.fault_step:
+    if fault is not None and fault.kind == "sensor_bias" and t >= task.fault_step:
         if fault.index == 0:
             m0 = m0 + fault.magnitude
         else:
@@ -238,6 +262,10 @@ def batch_step(
     t (N,). Returns (state, observations (10, N) float64, rewards (N,), terminated (N,))."""
     plant, integral, prev, held = state
     cmd = acts * task.action_scale
+    if task.command_offsets is not None:
+        s = t - 1
+        nominal = task.offset_table[s[0], :, None] if (s == s[0]).all() else task.offset_table[s].T
+        cmd = nominal + cmd
     fault = task.fault
     if fault is not None:
         i, active = fault.index, t > task.fault_step
@@ -249,7 +277,7 @@ def batch_step(
     plant, y = task.plant_arrays(plant, cmd, t)
     m = y + noise * task.noise_std[:, None]
     if fault is not None and fault.kind == "sensor_bias":
-        m[fault.index] = np.where(t > task.fault_step, m[fault.index] + fault.magnitude, m[fault.index])
+        m[fault.index] = np.where(t >= task.fault_step, m[fault.index] + fault.magnitude, m[fault.index])
     e = 100.0 * (ref - m)
     integral = np.clip(integral + e * task.dt, -task.integral_limit, task.integral_limit)
     d = acts - prev
@@ -268,6 +296,9 @@ def initial_observation(task: EngineTask, ref: np.ndarray, draws: np.ndarray) ->
     column = np.ndim(draws) == 1
     y = task.initial_outputs if column else task.initial_outputs[:, None]
     m = y + np.asarray(draws) * (task.noise_std if column else task.noise_std[:, None])
+    fault = task.fault
+    if fault is not None and fault.kind == "sensor_bias" and task.fault_step == 0:
+        m[fault.index] = m[fault.index] + fault.magnitude
     zeros = np.zeros_like(m)
     obs = np.concatenate([100.0 * m, 100.0 * ref, 100.0 * (ref - m), zeros, zeros], axis=0)
     return obs.astype(np.float32)
@@ -310,7 +341,7 @@ class EngineTrackingEnv(gym.Env):
 
     ## Rewards
     ``-0.1 (e_pc^2 + e_mr^2) - 0.1 |a_k - a_(k-1)|^2`` with errors in %: about -0.1 per step
-    for 1 % errors. Leaving the envelope (|Pc| or |MR| deviation above 10 %) terminates the
+    for 1 % errors. Leaving the envelope (a noise-free Pc or MR tracking error above 10 %) ends the
     episode with a penalty larger than the worst cost of all remaining steps, so ending early
     never pays.
 
@@ -319,9 +350,11 @@ class EngineTrackingEnv(gym.Env):
 
     ## Episode End
     Termination on leaving the envelope; truncation after ``episode_seconds`` (10 s, 250 steps).
+    ``gymnasium.make`` also applies the registered limit of 250 steps: for longer episodes pass
+    ``max_episode_steps`` too.
 
     ## Arguments
-    power : 65-109 %, default 100. plant : "truth" (default), "identified" (at 70-110 %), a
+    power : 65-109 %, default 100. plant : "truth" (default), "identified" (at 70, 80, 90, 100 %), a
     model.json path or a model. truth : TruthConfig or dict (asymmetric_gains, backlash,
     stiction, sensor_noise), the effects added to the plant. reference : "random_steps"
     (default), "step", "ramp", "prbs", "zero"; reference_amplitude (normalized, default 0.01).
@@ -357,7 +390,9 @@ class EngineTrackingEnv(gym.Env):
         self._state = [self.task.initial_plant_floats(), [0.0, 0.0], [0.0, 0.0], 0.0]
         self._t = 0
         obs = np.clip(initial_observation(self.task, refs[0], noise[0]), self._low, self._high)
-        self._history = [[0.0, 0.0, *refs[0], 0.0, 0.0]] if self.render_mode else []
+        if self.render_mode:
+            valve = self.task.valve_positions(self._state[0])
+            self._history = [[obs[0] / 100.0, obs[1] / 100.0, *refs[0], valve[0], valve[1]]]
         return obs, {}
 
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict]:

@@ -129,4 +129,12 @@ class Fault:
             raise ValueError(f"fault index must be an integer in 0..{limit - 1}, got {fault.index!r}")
         if not isinstance(fault.magnitude, int | float) or not np.isfinite(fault.magnitude):
             raise ValueError(f"fault magnitude must be a finite number, got {fault.magnitude!r}")
+        if fault.kind == "sensor_bias" and abs(fault.magnitude) > 0.05:
+            raise ValueError(
+                f"sensor_bias magnitude is a normalized deviation within +-0.05, got {fault.magnitude!r}"
+            )
+        if fault.kind == "gain_loss" and not 0.0 <= fault.magnitude <= 1.0:
+            raise ValueError(
+                f"gain_loss magnitude is the remaining gain, within 0-1, got {fault.magnitude!r}"
+            )
         return fault

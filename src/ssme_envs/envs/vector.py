@@ -40,6 +40,10 @@ class EngineTrackingVectorEnv(VectorEnv):
     ) -> None:
         if not isinstance(num_envs, int) or num_envs < 1:
             raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
+        if max_episode_steps is not None and (
+            not isinstance(max_episode_steps, int) or max_episode_steps < 1
+        ):
+            raise ValueError(f"max_episode_steps must be a positive integer, got {max_episode_steps!r}")
         if render_mode is not None:
             raise ValueError("the native vector env does not render; render a single env instead")
         mode = AutoresetMode(autoreset_mode)
@@ -144,9 +148,14 @@ class EngineTrackingVectorEnv(VectorEnv):
         else:
             done = np.flatnonzero(terminated | truncated)
             if done.size:
+                mask = terminated | truncated
+                # the layout of gymnasium's SyncVectorEnv: final observations, final step infos
+                # (empty for these envs), and their masks
                 infos = {
                     "final_obs": np.empty(self.num_envs, dtype=object),
-                    "_final_obs": terminated | truncated,
+                    "_final_obs": mask,
+                    "final_info": {},
+                    "_final_info": mask.copy(),
                 }
                 for i in done:
                     infos["final_obs"][i] = obs[i].copy()

@@ -89,11 +89,20 @@ class TruthConfig:
     sensor_noise: float | tuple[float, ...] = (1e-4, 1e-4)
 
     def __post_init__(self) -> None:
+        if not isinstance(self.asymmetric_gains, bool):
+            raise ValueError(f"asymmetric_gains must be True or False, got {self.asymmetric_gains!r}")
         for name in ("backlash", "stiction"):
             value = getattr(self, name)
-            if not (np.isfinite(value) and value >= 0):
+            if (
+                isinstance(value, bool)
+                or not isinstance(value, int | float)
+                or not (np.isfinite(value) and value >= 0)
+            ):
                 raise ValueError(f"{name} must be a finite width >= 0, got {value!r}")
-        noise = np.atleast_1d(np.asarray(self.sensor_noise, dtype=float))
+        try:
+            noise = np.atleast_1d(np.asarray(self.sensor_noise, dtype=float))
+        except (TypeError, ValueError):
+            raise ValueError(f"sensor_noise must be numbers, got {self.sensor_noise!r}") from None
         if noise.ndim != 1 or not np.all(np.isfinite(noise)) or np.any(noise < 0):
             raise ValueError(
                 f"sensor_noise must be finite standard deviations >= 0, got {self.sensor_noise!r}"

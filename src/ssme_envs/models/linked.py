@@ -13,10 +13,10 @@ SSME covering its full range of operation"; NASA TM-104421 linked 25 point model
   valve positions, 0 at 100 %) is the one consistent with every point model's DC gain:
   ``d y_eq / dP = G(P) d u_eq / dP``, integrated from 100 %. (The mean of the up and down gains
   lambda and 2 - lambda is 1, so the schedule uses G = C (I - A)^-1 B.)
-- **Dynamics between levels** (used by the throttle environment): the velocity form
-  ``dx(k+1) = A(P) dx(k) + B(P) du*(k)``, ``y(k+1) = y(k) + C dx(k+1)``, scheduled on the
-  commanded power. At constant power it is exactly the local model; when the valves move slowly
-  along ``u_eq``, the outputs move along ``y_eq``: that is the consistency condition above.
+- **Dynamics between levels** (used by the throttle environment): scheduled on the commanded
+  power, ``x(k+1) = A(P) x + B(P) u* + (I - A(P)) C^T c(P)`` with
+  ``c(P) = y_eq(P) - G(P) u_eq(P)``: at a fixed power the local point model about its operating
+  point, and on the nominal schedule ``u = u_eq(P)`` an equilibrium at ``y_eq(P)`` at every power.
 """
 
 from __future__ import annotations
