@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from ssme_envs.envs.engine_tracking import EngineTask, EngineTrackingEnv, resolve_truth
+from ssme_envs.envs.engine_tracking import EngineTask, EngineTrackingEnv, resolve_truth, table_rows
 from ssme_envs.envs.references import Fault
 from ssme_envs.models.engine import (
     ENGINE_DT,
@@ -53,7 +53,6 @@ class ThrottleTask(EngineTask):
     """
 
     power: np.ndarray = field(default=None)  # commanded power per step, %
-    nominal_valves: np.ndarray = field(default=None)  # (T + 1, 2)
     nominal_outputs: np.ndarray = field(default=None)  # (T + 1, 2), the references
     k_table: np.ndarray = field(default=None)  # (T + 1, n, p)
     b_table: np.ndarray = field(default=None)  # (T + 1, n, m)
@@ -98,15 +97,19 @@ class ThrottleTask(EngineTask):
         return cls(
             **fields,
             power=power,
-            nominal_valves=u_nom,
             nominal_outputs=y_nom,
             k_table=k,
             b_table=b,
             lam_table=lam_minus_one,
             state_offsets=offset,
             x_start=x_start,
-            tables=(k.tolist(), b.tolist(), lam_minus_one.tolist(), u_nom.tolist(), offset.tolist()),
+            tables=(k.tolist(), b.tolist(), lam_minus_one.tolist(), offset.tolist()),
         )
+
+    @property
+    def nominal_valves(self) -> np.ndarray:
+        """The nominal valve schedule u_eq(P(t)), (T + 1, 2): the offset of the valve commands."""
+        return self.offset_table
 
     @property
     def draw_size(self) -> int:
@@ -137,7 +140,8 @@ class ThrottleTask(EngineTask):
 
     def plant_floats(self, plant: list, cmd: list, t: int) -> tuple[list, float, float]:
         x, linkage, valve = plant
-        k_rows, b_rows, lam, u_nom, offset = (table[t - 1] for table in self.tables)
+        k_rows, b_rows, lam, offset = (table[t - 1] for table in self.tables)
+        u_nom = self.command_offsets[t - 1]
         linkage, valve = valves_floats(linkage, valve, cmd, self.params.half_backlash, self.params.stiction)
         u_star = [v + g * abs(v - un) for v, g, un in zip(valve, lam, u_nom)]
         x = [
@@ -146,19 +150,14 @@ class ThrottleTask(EngineTask):
         ]
         return [x, linkage, valve], x[-2], x[-1]
 
-    def plant_arrays(self, plant: list, cmd: np.ndarray, t: np.ndarray) -> tuple[list, np.ndarray]:
+    def plant_arrays(
+        self, plant: list, cmd: np.ndarray, t: np.ndarray, synced: bool
+    ) -> tuple[list, np.ndarray]:
         x, linkage, valve = plant
-        s = t - 1
-        if (s == s[0]).all():
-            k, b = self.k_table[s[0]], self.b_table[s[0]]
-            lam, u_nom, offset = (
-                self.lam_table[s[0], :, None],
-                self.nominal_valves[s[0], :, None],
-                self.state_offsets[s[0], :, None],
-            )
-        else:
-            k, b = self.k_table[s].transpose(1, 2, 0), self.b_table[s].transpose(1, 2, 0)
-            lam, u_nom, offset = self.lam_table[s].T, self.nominal_valves[s].T, self.state_offsets[s].T
+        k, b, lam, u_nom, offset = (
+            table_rows(table, t, synced)
+            for table in (self.k_table, self.b_table, self.lam_table, self.offset_table, self.state_offsets)
+        )
         linkage, valve = valves_arrays(linkage, valve, cmd, self.params.half_backlash, self.params.stiction)
         u_star = valve + lam * np.abs(valve - u_nom)
         x = dynamics_arrays(x, u_star, self.params.shift_source, k, b) + offset

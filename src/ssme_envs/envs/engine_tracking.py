@@ -176,7 +176,9 @@ class EngineTask:
         x, linkage, valve = step_floats(*plant, cmd, self.params, self.rows)
         return [x, linkage, valve], x[-2], x[-1]
 
-    def plant_arrays(self, plant: list, cmd: np.ndarray, t: np.ndarray) -> tuple[list, np.ndarray]:
+    def plant_arrays(
+        self, plant: list, cmd: np.ndarray, t: np.ndarray, synced: bool
+    ) -> tuple[list, np.ndarray]:
         x, linkage, valve = step_arrays(*plant, cmd, self.params)
         return [x, linkage, valve], x[x.shape[0] - 2 :]
 
@@ -255,17 +257,31 @@ def scalar_step(task: EngineTask, state: list, a0: float, a1: float, t: int, ref
     return [plant, [i0, i1], [a0, a1], held], obs, reward, terminated
 
 
+def table_rows(table: np.ndarray, t: np.ndarray, synced: bool) -> np.ndarray:
+    """The rows of a per-step table (T + 1, ...) that act on the step t - 1 -> t, batch axis last:
+    (..., 1) or the shared (n, p) block when every env is at the same step, else (..., N)."""
+    if synced:
+        row = table[t[0] - 1]
+        return row[:, None] if row.ndim == 1 else row
+    return np.moveaxis(table[t - 1], 0, -1)
+
+
 def batch_step(
-    task: EngineTask, state: list, acts: np.ndarray, t: np.ndarray, ref: np.ndarray, noise: np.ndarray
+    task: EngineTask,
+    state: list,
+    acts: np.ndarray,
+    t: np.ndarray,
+    ref: np.ndarray,
+    noise: np.ndarray,
+    synced: bool,
 ):
     """N envs, one step, as :func:`scalar_step` on state-major arrays: acts, ref, noise (2, N),
-    t (N,). Returns (state, observations (10, N) float64, rewards (N,), terminated (N,))."""
+    t (N,); ``synced`` when every env is at the same step. Returns (state, observations (10, N)
+    float64, rewards (N,), terminated (N,))."""
     plant, integral, prev, held = state
     cmd = acts * task.action_scale
-    if task.command_offsets is not None:
-        s = t - 1
-        nominal = task.offset_table[s[0], :, None] if (s == s[0]).all() else task.offset_table[s].T
-        cmd = nominal + cmd
+    if task.offset_table is not None:
+        cmd = table_rows(task.offset_table, t, synced) + cmd
     fault = task.fault
     if fault is not None:
         i, active = fault.index, t > task.fault_step
@@ -274,7 +290,7 @@ def batch_step(
             cmd[i] = np.where(active, held, cmd[i])
         elif fault.kind == "gain_loss":
             cmd[i] = np.where(active, cmd[i] * fault.magnitude, cmd[i])
-    plant, y = task.plant_arrays(plant, cmd, t)
+    plant, y = task.plant_arrays(plant, cmd, t, synced)
     m = y + noise * task.noise_std[:, None]
     if fault is not None and fault.kind == "sensor_bias":
         m[fault.index] = np.where(t >= task.fault_step, m[fault.index] + fault.magnitude, m[fault.index])

@@ -122,7 +122,8 @@ class EngineTrackingVectorEnv(VectorEnv):
         acts = np.clip(acts.T, -1.0, 1.0)
         task = self.task
         t = np.minimum(self._t + 1, task.horizon)
-        if (t == t[0]).all():  # envs in step: contiguous slices
+        synced = bool((t == t[0]).all())
+        if synced:  # envs in step: contiguous slices
             noise = self._noise[t[0]]
             refs = (
                 self._refs[t[0]]
@@ -132,7 +133,7 @@ class EngineTrackingVectorEnv(VectorEnv):
         else:
             noise = self._noise[t, :, self._rows].T
             refs = self._shared_refs[t].T if self._refs is None else self._refs[t, :, self._rows].T
-        self._state, obs, reward, terminated = batch_step(task, self._state, acts, t, refs, noise)
+        self._state, obs, reward, terminated = batch_step(task, self._state, acts, t, refs, noise, synced)
         self._t = t
         obs = np.clip(obs.T.astype(np.float32), self._low, self._high)
         truncated = t >= self._limit
