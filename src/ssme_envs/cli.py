@@ -108,7 +108,10 @@ def build_parser() -> argparse.ArgumentParser:
         "bench", help="environment steps per second beside Pendulum-v1 and CartPole-v1 (ratios)"
     )
     bench.add_argument(
-        "--seconds", type=float, default=2.0, help="time per measurement (default: %(default)s)"
+        "--rounds",
+        type=int,
+        default=5,
+        help="alternating rounds per measurement, one episode each; the best counts (default: %(default)s)",
     )
     bench.add_argument("--sizes", default="1,64,1024,4096", help="vector sizes (default: %(default)s)")
     bench.add_argument("--env", action="append", help="env id to measure (repeatable; default: all)")
@@ -261,13 +264,13 @@ def _bench(args: argparse.Namespace) -> int:
         raise _UsageError(f"--sizes must be comma-separated positive integers, got {args.sizes!r}") from None
     if any(n < 1 for n in sizes):
         raise _UsageError(f"--sizes must be positive integers, got {args.sizes!r}")
-    if not 0 < args.seconds <= 60:
-        raise _UsageError(f"--seconds must be within (0, 60], got {args.seconds}")
+    if not 1 <= args.rounds <= 100:
+        raise _UsageError(f"--rounds must be within 1-100, got {args.rounds}")
     env_ids = args.env or list(ENV_IDS)
     unknown = [e for e in env_ids if e not in ENV_IDS]
     if unknown:
         raise _UsageError(f"unknown env {', '.join(unknown)}; choose from {', '.join(ENV_IDS)}")
-    rows = run_benchmark(env_ids, sizes, args.seconds, progress=lambda m: print(m, file=sys.stderr))
+    rows = run_benchmark(env_ids, sizes, args.rounds, progress=lambda m: print(m, file=sys.stderr))
     table = format_table(rows)
     print(table)
     if args.out is not None:

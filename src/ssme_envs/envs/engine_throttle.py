@@ -8,7 +8,13 @@ from typing import Any
 
 import numpy as np
 
-from ssme_envs.envs.engine_tracking import EngineTask, EngineTrackingEnv, resolve_truth, table_rows
+from ssme_envs.envs.engine_tracking import (
+    EngineTask,
+    EngineTrackingEnv,
+    resolve_truth,
+    table_rows,
+    time_last,
+)
 from ssme_envs.envs.references import Fault
 from ssme_envs.models.engine import (
     ENGINE_DT,
@@ -60,6 +66,17 @@ class ThrottleTask(EngineTask):
     state_offsets: np.ndarray = field(default=None)  # (T + 1, n), (I - A) C^T c(P)
     x_start: np.ndarray = field(default=None)  # (n,), the equilibrium at P(0) on the schedule
     tables: tuple = field(default=None, repr=False)  # the tables as float lists, for the scalar step
+    # K, B, lambda - 1, u_eq and the state offsets of each step stacked as rows, time last, so
+    # that one gather fetches every parameter of every env's step
+    schedule: np.ndarray = field(init=False, repr=False)
+    schedule_shapes: tuple = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        tables = (self.k_table, self.b_table, self.lam_table, self.offset_table, self.state_offsets)
+        rows = [time_last(table).reshape(-1, table.shape[0]) for table in tables]
+        object.__setattr__(self, "schedule", np.concatenate(rows))
+        object.__setattr__(self, "schedule_shapes", tuple(table.shape[1:] for table in tables))
 
     @classmethod
     def build_throttle(
@@ -119,9 +136,9 @@ class ThrottleTask(EngineTask):
     def shared_references(self) -> np.ndarray:
         return self.nominal_outputs
 
-    def episodes(self, draws: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        k, length = draws.shape[0], self.horizon + 1
-        return np.broadcast_to(self.nominal_outputs, (k, length, 2)).copy(), draws.reshape(k, length, 2)
+    def references(self, uniforms: np.ndarray) -> np.ndarray:
+        """The profile's references for every episode, a read-only view (2, horizon + 1, k)."""
+        return np.broadcast_to(self.nominal_outputs.T[:, :, None], (2, self.horizon + 1, uniforms.shape[1]))
 
     # Plant state: [x (n), linkage (m), valve (m)], starting at the schedule's equilibrium. The
     # command of step t - 1 -> t is absolute (the schedule at t - 1 plus the action, faults
@@ -154,10 +171,12 @@ class ThrottleTask(EngineTask):
         self, plant: list, cmd: np.ndarray, t: np.ndarray, synced: bool
     ) -> tuple[list, np.ndarray]:
         x, linkage, valve = plant
-        k, b, lam, u_nom, offset = (
-            table_rows(table, t, synced)
-            for table in (self.k_table, self.b_table, self.lam_table, self.offset_table, self.state_offsets)
-        )
+        rows, start, parts = table_rows(self.schedule, t, synced), 0, []
+        for shape in self.schedule_shapes:
+            size = int(np.prod(shape))
+            parts.append(rows[start : start + size].reshape(*shape, rows.shape[-1]))
+            start += size
+        k, b, lam, u_nom, offset = parts
         linkage, valve = valves_arrays(linkage, valve, cmd, self.params.half_backlash, self.params.stiction)
         u_star = valve + lam * np.abs(valve - u_nom)
         x = dynamics_arrays(x, u_star, self.params.shift_source, k, b) + offset

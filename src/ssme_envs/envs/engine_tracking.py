@@ -10,9 +10,14 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
-from scipy.special import ndtr
 
-from ssme_envs.envs.references import REFERENCE_KINDS, Fault, reference_signals, uniforms_needed
+from ssme_envs.envs.references import (
+    REFERENCE_KINDS,
+    Fault,
+    reference_signals,
+    uniforms_needed,
+    unit_normals,
+)
 from ssme_envs.models.engine import (
     POWER_LEVELS,
     StepParameters,
@@ -85,6 +90,7 @@ class EngineTask:
     noise_scale: tuple = field(init=False, repr=False)  # noise_std as floats, for the scalar step
     offset_table: np.ndarray | None = field(default=None, repr=False)  # (T + 1, m) added to commands
     command_offsets: list | None = field(init=False, repr=False)  # offset_table as floats
+    offset_schedule: np.ndarray | None = field(init=False, repr=False)  # offset_table, (m, T + 1)
     fault_step: int = field(init=False)  # the step after which the fault acts (-1: none)
 
     @classmethod
@@ -148,6 +154,8 @@ class EngineTask:
         object.__setattr__(self, "noise_scale", tuple(self.noise_std.tolist()))
         offsets = None if self.offset_table is None else self.offset_table.tolist()
         object.__setattr__(self, "command_offsets", offsets)
+        schedule = None if self.offset_table is None else time_last(self.offset_table)
+        object.__setattr__(self, "offset_schedule", schedule)
         object.__setattr__(
             self, "fault_step", round(self.fault.time / self.dt) if self.fault is not None else -1
         )
@@ -197,20 +205,29 @@ class EngineTask:
 
     @property
     def draw_size(self) -> int:
-        """Standard normal numbers one episode consumes: sensor noise, then the reference's."""
+        """Uniform float32 numbers one episode consumes: sensor noise, then the reference's."""
         return 2 * (self.horizon + 1) + uniforms_needed(self.reference, self.horizon + 1, 2, self.dt)
 
-    def episodes(self, draws: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """References (float64) and unit sensor-noise draws (float32, scaled by ``noise_std`` at
-        each step) of k episodes from their standard normal draws (k, draw_size, float32), each
-        of shape (k, horizon + 1, 2). One float32 call to the generator per episode keeps resets
-        cheap (the vector env resets thousands at once), and an episode computed alone equals the
-        same episode in a batch."""
-        k, length = draws.shape[0], self.horizon + 1
-        noise = draws[:, : 2 * length].reshape(k, length, 2)
-        uniforms = ndtr(draws[:, 2 * length :].astype(np.float64))
-        refs = reference_signals(self.reference, uniforms, length, self.amplitude, self.dt)
-        return refs, noise
+    def episodes(
+        self, uniforms: np.ndarray, noise_out: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """References and sensor noise of k episodes from their uniform draws, float32 of shape
+        (draw_size, k), episode axis last: references (2, horizon + 1, k) float64 and unit noise
+        (2, horizon + 1, k) float32, scaled by ``noise_std`` at each step. One float32 call to
+        the generator per episode keeps resets cheap (the vector env resets thousands at once),
+        and an episode computed alone equals the same episode in a batch. ``noise_out``: an
+        array to write the noise into."""
+        length, k = self.horizon + 1, uniforms.shape[1]
+        uniforms = np.ascontiguousarray(uniforms, dtype=np.float32)
+        out = None if noise_out is None else noise_out.reshape(2 * length, k)
+        noise = unit_normals(uniforms[: 2 * length], out).reshape(2, length, k)
+        return self.references(uniforms[2 * length :]), noise
+
+    def references(self, uniforms: np.ndarray) -> np.ndarray:
+        """The references (2, horizon + 1, k) of k episodes from their uniforms (m, k)."""
+        return reference_signals(
+            self.reference, uniforms.astype(np.float64), self.horizon + 1, self.amplitude, self.dt
+        )
 
 
 # The environment step exists twice, like the engine step it calls: on floats for the scalar
@@ -257,13 +274,18 @@ def scalar_step(task: EngineTask, state: list, a0: float, a1: float, t: int, ref
     return [plant, [i0, i1], [a0, a1], held], obs, reward, terminated
 
 
-def table_rows(table: np.ndarray, t: np.ndarray, synced: bool) -> np.ndarray:
-    """The rows of a per-step table (T + 1, ...) that act on the step t - 1 -> t, batch axis last:
-    (..., 1) or the shared (n, p) block when every env is at the same step, else (..., N)."""
+def time_last(table: np.ndarray) -> np.ndarray:
+    """A per-step table (T + 1, ...) as a schedule (..., T + 1): each entry's steps contiguous,
+    so that gathering every env's step is one cache-friendly ``take``."""
+    return np.ascontiguousarray(np.moveaxis(table, 0, -1))
+
+
+def table_rows(schedule: np.ndarray, t: np.ndarray, synced: bool) -> np.ndarray:
+    """The entries of a schedule (..., T + 1) that act on the step t - 1 -> t, batch axis last:
+    (..., 1) when every env is at the same step, else (..., N)."""
     if synced:
-        row = table[t[0] - 1]
-        return row[:, None] if row.ndim == 1 else row
-    return np.moveaxis(table[t - 1], 0, -1)
+        return schedule[..., t[0] - 1, None]
+    return np.take(schedule, t - 1, axis=-1)
 
 
 def batch_step(
@@ -274,14 +296,16 @@ def batch_step(
     ref: np.ndarray,
     noise: np.ndarray,
     synced: bool,
+    low: np.ndarray,
+    high: np.ndarray,
 ):
-    """N envs, one step, as :func:`scalar_step` on state-major arrays: acts, ref, noise (2, N),
-    t (N,); ``synced`` when every env is at the same step. Returns (state, observations (10, N)
-    float64, rewards (N,), terminated (N,))."""
-    plant, integral, prev, held = state
+    """N envs, one step, as :func:`scalar_step` on state-major arrays: acts (2, N), ref (2, N)
+    or (2, 1), noise (2, N), t (N,); ``synced`` when every env is at the same step. Returns
+    (state, observations (N, 10) float32 clipped to [low, high], rewards (N,), terminated (N,))."""
+    plant, previous_integral, prev, held = state
     cmd = acts * task.action_scale
-    if task.offset_table is not None:
-        cmd = table_rows(task.offset_table, t, synced) + cmd
+    if task.offset_schedule is not None:
+        cmd += table_rows(task.offset_schedule, t, synced)
     fault = task.fault
     if fault is not None:
         i, active = fault.index, t > task.fault_step
@@ -291,18 +315,36 @@ def batch_step(
         elif fault.kind == "gain_loss":
             cmd[i] = np.where(active, cmd[i] * fault.magnitude, cmd[i])
     plant, y = task.plant_arrays(plant, cmd, t, synced)
-    m = y + noise * task.noise_std[:, None]
+    n = acts.shape[1]
+    obs = np.empty((10, n))  # rows as in the observation table, filled in place
+    m = obs[0:2]
+    np.multiply(noise, task.noise_std[:, None], out=m)
+    m += y
     if fault is not None and fault.kind == "sensor_bias":
         m[fault.index] = np.where(t >= task.fault_step, m[fault.index] + fault.magnitude, m[fault.index])
-    e = 100.0 * (ref - m)
-    integral = np.clip(integral + e * task.dt, -task.integral_limit, task.integral_limit)
+    e = np.subtract(ref, m, out=obs[4:6])
+    e *= 100.0
+    integral = e * task.dt
+    integral += previous_integral
+    np.maximum(integral, -task.integral_limit, out=integral)
+    np.minimum(integral, task.integral_limit, out=integral)
     d = acts - prev
-    e2, d2 = e * e, d * d
-    reward = -task.error_weight * (e2[0] + e2[1]) - task.rate_weight * (d2[0] + d2[1])
-    terminated = (np.abs(y[0] - ref[0]) > task.envelope) | (np.abs(y[1] - ref[1]) > task.envelope)
-    reward = np.where(terminated, reward - task.step_cost_bound * (task.horizon - t + 1), reward)
-    obs = np.concatenate([100.0 * m, 100.0 * ref, e, integral, acts], axis=0)
-    return [plant, integral, acts, held], obs, reward, terminated
+    e2, d2 = e * e, np.multiply(d, d, out=d)
+    reward = (e2[0] + e2[1]) * -task.error_weight
+    reward -= (d2[0] + d2[1]) * task.rate_weight
+    miss = np.subtract(y, ref, out=e2)
+    np.abs(miss, out=miss)
+    terminated = np.maximum(miss[0], miss[1]) > task.envelope
+    if terminated.any():
+        reward = np.where(terminated, reward - task.step_cost_bound * (task.horizon - t + 1), reward)
+    m *= 100.0
+    np.multiply(ref, 100.0, out=obs[2:4])
+    obs[6:8] = integral
+    obs[8:10] = acts
+    out = obs.T.astype(np.float32)
+    np.maximum(out, low, out=out)
+    np.minimum(out, high, out=out)
+    return [plant, integral, acts, held], out, reward, terminated
 
 
 def initial_observation(task: EngineTask, ref: np.ndarray, draws: np.ndarray) -> np.ndarray:
@@ -399,9 +441,9 @@ class EngineTrackingEnv(gym.Env):
 
     def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[np.ndarray, dict]:
         super().reset(seed=seed)
-        draws = self.np_random.standard_normal((1, self.task.draw_size), dtype=np.float32)
-        refs, noise = self.task.episodes(draws)
-        refs, noise = refs[0], noise[0]
+        uniforms = self.np_random.random(self.task.draw_size, dtype=np.float32)
+        refs, noise = self.task.episodes(uniforms[:, None])
+        refs, noise = refs[:, :, 0].T, noise[:, :, 0].T
         self._refs, self._noise = refs.tolist(), noise.astype(np.float64).tolist()
         self._state = [self.task.initial_plant_floats(), [0.0, 0.0], [0.0, 0.0], 0.0]
         self._t = 0

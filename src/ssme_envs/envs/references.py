@@ -1,7 +1,7 @@
 """Reference signals and fault specifications for the tracking environments.
 
-Every generator takes a seeded numpy Generator and returns a whole episode at reset, so that the
-per-step cost is an index and the random streams do not depend on how the episode is stepped.
+Every episode's reference is computed at reset from uniforms its env drew, so that the per-step
+cost is an index and the random streams do not depend on how the episode is stepped.
 """
 
 from __future__ import annotations
@@ -38,8 +38,9 @@ def _hold_count(length: int, dt: float) -> int:
 def reference_signals(
     kind: str, uniforms: np.ndarray, length: int, amplitude: np.ndarray, dt: float
 ) -> np.ndarray:
-    """References of k episodes, shape (k, length, channels), from uniforms in [0, 1) of shape
-    (k, :func:`uniforms_needed`), for deviations within +-amplitude per channel.
+    """References of k episodes, shape (channels, length, k), from uniforms in [0, 1) of shape
+    (:func:`uniforms_needed`, k), for deviations within +-amplitude per channel. The episode
+    axis is last, the layout in which the vector envs read one step of every env.
 
     Kinds
     -----
@@ -49,40 +50,58 @@ def reference_signals(
     prbs : +-amplitude per channel, switching with probability dt / 0.5 s each step.
     zero : regulation about the operating point.
 
-    Every episode is computed from its own row alone, so one episode drawn by itself equals the
-    same episode drawn in a batch.
+    Every episode is computed from its own column alone, so one episode drawn by itself equals
+    the same episode drawn in a batch.
     """
-    k, channels = uniforms.shape[0], amplitude.size
-    steps = np.arange(length)
+    k, channels = uniforms.shape[1], amplitude.size
+    steps = np.arange(length)[:, None]
+    scale = amplitude[:, None, None]
     if kind == "zero":
-        return np.zeros((k, length, channels))
+        return np.zeros((channels, length, k))
     if kind == "random_steps":
         count = _hold_count(length, dt)
         shortest, longest = round(1.0 / dt), round(3.0 / dt)
-        holds = shortest + np.floor(uniforms[:, :count] * (longest - shortest + 1)).astype(np.int64)
-        levels = (2.0 * uniforms[:, count:].reshape(k, count, channels) - 1.0) * amplitude
-        ends = np.cumsum(holds, axis=1)
-        starts = np.zeros((k, length + 1), dtype=np.int64)  # 1 where a new hold begins
+        holds = shortest + np.floor(uniforms[:count] * (longest - shortest + 1)).astype(np.intp)
+        levels = (2.0 * uniforms[count:].reshape(count, channels, k) - 1.0) * amplitude[:, None]
+        ends = np.cumsum(holds, axis=0)
+        # flat index of (hold, episode) at every step: episode i starts at i and moves on by k
+        # at each new hold
+        index = np.zeros((length, k), dtype=np.intp)
+        index[0] = np.arange(k)
         rows, cols = np.nonzero(ends < length)
-        starts[rows, ends[rows, cols]] = 1
-        segment = np.cumsum(starts[:, :length], axis=1) + (np.arange(k) * count)[:, None]
-        return levels.reshape(k * count, channels)[segment]
+        index[ends[rows, cols], cols] = k
+        _accumulate_rows(index)
+        refs = np.empty((channels, length, k))
+        for c in range(channels):  # mode "clip" (indices are in range) writes without buffering
+            np.take(np.ascontiguousarray(levels[:, c]), index, out=refs[c], mode="clip")
+        return refs
     if kind == "step":
-        at = np.floor(uniforms[:, 0] * max(1, int(0.4 * length)))
-        level = (2.0 * uniforms[:, 1:] - 1.0) * amplitude
-        return (steps[None, :] >= at[:, None])[:, :, None] * level[:, None, :]
+        at = np.floor(uniforms[0] * max(1, int(0.4 * length)))
+        level = (2.0 * uniforms[1:] - 1.0) * amplitude[:, None]
+        return np.where(steps >= at, level[:, None, :], 0.0)
     if kind == "ramp":
-        at = np.floor(uniforms[:, 0] * max(1, int(0.3 * length)))
-        span = round(1.0 / dt) + np.floor(uniforms[:, 1] * (round(4.0 / dt) - round(1.0 / dt) + 1))
-        level = (2.0 * uniforms[:, 2:] - 1.0) * amplitude
-        ramp = np.clip((steps[None, :] - at[:, None]) / span[:, None], 0.0, 1.0)
-        return ramp[:, :, None] * level[:, None, :]
+        at = np.floor(uniforms[0] * max(1, int(0.3 * length)))
+        span = round(1.0 / dt) + np.floor(uniforms[1] * (round(4.0 / dt) - round(1.0 / dt) + 1))
+        level = (2.0 * uniforms[2:] - 1.0) * amplitude[:, None]
+        return np.clip((steps - at) / span, 0.0, 1.0) * level[:, None, :]
     if kind == "prbs":
-        flips = uniforms[:, : length * channels].reshape(k, length, channels) < min(1.0, dt / 0.5)
-        start = np.where(uniforms[:, length * channels :] < 0.5, -1.0, 1.0)
-        signs = np.where(np.cumsum(flips, axis=1) % 2 == 0, 1.0, -1.0) * start[:, None, :]
-        return signs * amplitude
+        flips = (uniforms[: length * channels] < min(1.0, dt / 0.5)).reshape(channels, length, k)
+        start = np.where(uniforms[length * channels :] < 0.5, -1.0, 1.0)
+        for c in range(channels):
+            _accumulate_rows(flips[c], np.logical_xor)  # odd number of flips so far
+        return np.where(flips, -1.0, 1.0) * start[:, None, :] * scale
     raise ValueError(f"unknown reference kind {kind!r}; choose one of {', '.join(REFERENCE_KINDS)}")
+
+
+def _accumulate_rows(table: np.ndarray, operation: np.ufunc = np.add) -> None:
+    """Running ``operation`` down the rows of a (steps, k) table, in place. Many episodes go row
+    by row: numpy's accumulate along axis 0 walks one column at a time, strided, an order of
+    magnitude slower then; for a few it is the faster (same results: integer and boolean)."""
+    if table.shape[1] < 16:
+        operation.accumulate(table, axis=0, out=table)
+        return
+    for row in range(1, table.shape[0]):
+        operation(table[row - 1], table[row], out=table[row])
 
 
 @dataclass(frozen=True)
@@ -138,3 +157,27 @@ class Fault:
                 f"gain_loss magnitude is the remaining gain, within 0-1, got {fault.magnitude!r}"
             )
         return fault
+
+
+def unit_normals(uniforms: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """Standard normal float32 numbers from uniform float32 ones in [0, 1), by the Box-Muller
+    transform: an even number of rows, (2 r, ...) -> (2 r, ...), rows i and r + i paired;
+    ``out`` (same shape) to fill in place.
+
+    Elementwise float32 work: an env drawn alone gets the same bits as in a batch. Rows go in
+    chunks of about 32k numbers, so that a batch of thousands of episodes stays in cache.
+    """
+    half = uniforms.shape[0] // 2
+    normals = np.empty_like(uniforms) if out is None else out
+    chunk = max(1, 2**15 // max(1, uniforms[0].size))
+    for a in range(0, half, chunk):
+        first, second = slice(a, min(a + chunk, half)), slice(half + a, half + min(a + chunk, half))
+        radius = np.log1p(-uniforms[first])  # 1 - u in (0, 1]: the logarithm is finite
+        radius *= -2.0
+        np.sqrt(radius, out=radius)
+        angle = uniforms[second] * np.float32(2.0 * np.pi)
+        np.cos(angle, out=normals[first])
+        np.sin(angle, out=normals[second])
+        normals[first] *= radius
+        normals[second] *= radius
+    return normals

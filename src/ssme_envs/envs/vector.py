@@ -7,6 +7,7 @@ bit for bit, in either autoreset mode.
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import gymnasium as gym
@@ -61,14 +62,19 @@ class EngineTrackingVectorEnv(VectorEnv):
         self.single_observation_space = observation_space()
         self.observation_space = batch_space(self.single_observation_space, num_envs)
         self._low, self._high = self.single_observation_space.low, self.single_observation_space.high
-        n, t1 = num_envs, self.task.horizon + 1
+        n, length = num_envs, self.task.horizon + 1
         self._rngs: list[np.random.Generator] = [seeding.np_random(None)[0] for _ in range(n)]
-        # episode data time-major, (T + 1, 2, N): one step's values for all envs are contiguous
-        # references shared by every episode (the throttle profile) are not copied per env
+        # Episode data with the env axis last: one step's values of every env are contiguous.
+        # References common to every episode (the throttle profile) are not stored per env.
         self._shared_refs = self.task.shared_references
-        self._refs = None if self._shared_refs is not None else np.zeros((t1, 2, n))
-        self._noise = np.zeros((t1, 2, n), dtype=np.float32)  # unit draws, scaled at each step
+        if self._shared_refs is not None:
+            self._shared_refs_by_step = np.ascontiguousarray(self._shared_refs.T)  # (2, T + 1)
+        self._refs = None if self._shared_refs is not None else np.zeros((2, length, n))
+        self._noise = np.zeros((2, length, n), dtype=np.float32)  # unit draws, scaled at each step
+        self._draws: np.ndarray | None = None  # (N, draw_size) and transposed, made at first reset
+        self._uniforms: np.ndarray | None = None
         self._t = np.zeros(n, dtype=np.int64)
+        self._synced = True  # every env at the same step: reads are slices, not gathers
         self._rows = np.arange(n)
         self._state = self._zero_state(n)
         self._autoreset = np.zeros(n, dtype=bool)
@@ -79,22 +85,34 @@ class EngineTrackingVectorEnv(VectorEnv):
 
     def _restart(self, envs: np.ndarray) -> np.ndarray:
         """Zero the state of the given envs and draw their next episodes; their first observations."""
-        draws = np.empty((len(envs), self.task.draw_size), dtype=np.float32)
+        task, k = self.task, len(envs)
+        if k == self.num_envs:
+            self._state = self._zero_state(k)
+        else:
+            fresh = self._zero_state(k)
+            for block, new in zip(self._state[0], fresh[0], strict=True):
+                block[..., envs] = new
+            for block, new in zip(self._state[1:], fresh[1:], strict=True):
+                block[..., envs] = new
+        # Buffers reused from episode to episode: fresh tens of MB would cost page faults.
+        if self._draws is None:
+            self._draws = np.empty((self.num_envs, task.draw_size), dtype=np.float32)
+            self._uniforms = np.empty((task.draw_size, self.num_envs), dtype=np.float32)
+        draws = self._draws[:k]
         for row, i in enumerate(envs):
-            self._rngs[i].standard_normal(out=draws[row], dtype=np.float32)
-        refs, noise = self.task.episodes(draws)
-        cols = slice(None) if len(envs) == self.num_envs else envs  # all envs: a plain (faster) copy
-        if self._refs is not None:
-            self._refs[:, :, cols] = refs.transpose(1, 2, 0)
-        self._noise[:, :, cols] = noise.transpose(1, 2, 0)
-        fresh = self._zero_state(len(envs))
-        for block, new in zip(self._state[0], fresh[0], strict=True):
-            block[..., envs] = new
-        for block, new in zip(self._state[1:], fresh[1:], strict=True):
-            block[..., envs] = new
+            self._rngs[i].random(out=draws[row], dtype=np.float32)
+        every = k == self.num_envs
+        uniforms = _transpose(draws, self._uniforms if every else None)
+        refs, noise = task.episodes(uniforms, self._noise if every else None)
+        if every:
+            self._refs = None if self._refs is None else refs
+        else:
+            self._noise[:, :, envs] = noise
+            if self._refs is not None:
+                self._refs[:, :, envs] = refs
         self._t[envs] = 0
-        first_refs = refs[:, 0].T  # (2, k)
-        obs = initial_observation(self.task, first_refs, self._noise[0][:, envs]).T
+        self._synced = bool((self._t == self._t[0]).all())
+        obs = initial_observation(task, refs[:, 0], noise[:, 0]).T
         return np.clip(obs, self._low, self._high)
 
     def reset(self, *, seed: int | list[int | None] | None = None, options: dict | None = None):
@@ -114,42 +132,46 @@ class EngineTrackingVectorEnv(VectorEnv):
         acts = np.asarray(actions, dtype=np.float64)
         if acts.shape != (self.num_envs, 2):
             raise ValueError(f"actions must have shape ({self.num_envs}, 2), got {acts.shape}")
-        if not np.all(np.isfinite(acts)):
-            bad = np.argwhere(~np.isfinite(acts))[0]
-            raise ValueError(
-                f"action of env {bad[0]} must be finite, got {acts[bad[0]].tolist()} (NaN or inf)"
-            )
-        acts = np.clip(acts.T, -1.0, 1.0)
+        if not math.isfinite(acts.sum()):  # one reduction; the element search only on failure
+            bad = np.argwhere(~np.isfinite(acts))
+            if bad.size:
+                raise ValueError(
+                    f"action of env {bad[0, 0]} must be finite, got {acts[bad[0, 0]].tolist()} (NaN or inf)"
+                )
+        clipped = np.empty((2, self.num_envs))  # state-major and contiguous, as the core wants
+        np.maximum(acts.T, -1.0, out=clipped)
+        np.minimum(clipped, 1.0, out=clipped)
         task = self.task
-        t = np.minimum(self._t + 1, task.horizon)
-        synced = bool((t == t[0]).all())
-        if synced:  # envs in step: contiguous slices
-            noise = self._noise[t[0]]
-            refs = (
-                self._refs[t[0]]
-                if self._refs is not None
-                else np.repeat(self._shared_refs[t[0], :, None], self.num_envs, axis=1)
-            )
-        else:
-            noise = self._noise[t, :, self._rows].T
-            refs = self._shared_refs[t].T if self._refs is None else self._refs[t, :, self._rows].T
-        self._state, obs, reward, terminated = batch_step(task, self._state, acts, t, refs, noise, synced)
-        self._t = t
-        obs = np.clip(obs.T.astype(np.float32), self._low, self._high)
+        t = self._t
+        t += 1
+        np.minimum(t, task.horizon, out=t)  # an env past its end is restarted below
+        if self._synced:  # contiguous slices
+            noise = self._noise[:, t[0]]
+            refs = self._refs[:, t[0]] if self._refs is not None else self._shared_refs[t[0], :, None]
+        else:  # one flat index for both tables: take is much faster than fancy indexing
+            flat = t * self.num_envs + self._rows
+            noise = np.take(self._noise.reshape(2, -1), flat, axis=1)
+            if self._refs is None:
+                refs = np.take(self._shared_refs_by_step, t, axis=1)
+            else:
+                refs = np.take(self._refs.reshape(2, -1), flat, axis=1)
+        self._state, obs, reward, terminated = batch_step(
+            task, self._state, clipped, t, refs, noise, self._synced, self._low, self._high
+        )
         truncated = t >= self._limit
         infos: dict[str, Any] = {}
         if self.metadata["autoreset_mode"] == AutoresetMode.NEXT_STEP:
-            restart = np.flatnonzero(self._autoreset)
-            if restart.size:
+            if self._autoreset.any():
+                restart = np.flatnonzero(self._autoreset)
                 obs[restart] = self._restart(restart)
                 reward[restart] = 0.0
                 terminated[restart] = False
                 truncated[restart] = False
             self._autoreset = terminated | truncated
         else:
-            done = np.flatnonzero(terminated | truncated)
-            if done.size:
-                mask = terminated | truncated
+            mask = terminated | truncated
+            if mask.any():
+                done = np.flatnonzero(mask)
                 # the layout of gymnasium's SyncVectorEnv: final observations, final step infos
                 # (empty for these envs), and their masks
                 infos = {
@@ -162,6 +184,17 @@ class EngineTrackingVectorEnv(VectorEnv):
                     infos["final_obs"][i] = obs[i].copy()
                 obs[done] = self._restart(done)
         return obs, reward, terminated, truncated, infos
+
+
+def _transpose(table: np.ndarray, out: np.ndarray | None = None, tile: int = 256) -> np.ndarray:
+    """A C-contiguous transpose copied tile by tile (into ``out`` if given): numpy's one-pass
+    copy of a transposed view strides through memory, several times slower on tens of MB."""
+    rows, cols = table.shape
+    out = np.empty((cols, rows), dtype=table.dtype) if out is None else out
+    for i in range(0, rows, tile):
+        for j in range(0, cols, tile):
+            out[j : j + tile, i : i + tile] = table[i : i + tile, j : j + tile].T
+    return out
 
 
 class EngineThrottleVectorEnv(EngineTrackingVectorEnv):

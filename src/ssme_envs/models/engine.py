@@ -149,7 +149,8 @@ class StepParameters:
 # for a batch (the vector environment, the simulators). Both perform the same IEEE operations
 # in the same order, so an engine gives the same bits alone or batched; tests hold them to it.
 # Order: linkage = min(max(l, c - h), c + h); valve = q if |q - v| > s else v;
-# u* = v + (lambda - 1)|v|; x_i <- (x_src(i) + sum_j K_ij y_j) + sum_j B_ij u*_j, sums left to right.
+# u* = v + (lambda - 1)|v|; x_i <- (x_src(i) + sum_j K_ij y_j) + sum_j B_ij u*_j, sums left to right
+# (no x_src term for the first state of each output's chain).
 
 
 def valves_floats(linkage: list, valve: list, command: list, half: float, stick: float) -> tuple[list, list]:
@@ -172,7 +173,7 @@ def dynamics_floats(x: list, u: list, shift_source: tuple, k_rows: list, b_rows:
         y0, y1 = y
         u0, u1 = u
         return [
-            ((x[source] if source >= 0 else 0.0) + (k0 * y0 + k1 * y1)) + (b0 * u0 + b1 * u1)
+            ((x[source] + (k0 * y0 + k1 * y1)) if source >= 0 else (k0 * y0 + k1 * y1)) + (b0 * u0 + b1 * u1)
             for source, (k0, k1), (b0, b1) in zip(shift_source, k_rows, b_rows)
         ]
     x_next = []
@@ -183,7 +184,7 @@ def dynamics_floats(x: list, u: list, shift_source: tuple, k_rows: list, b_rows:
         bu = b_row[0] * u[0]
         for b, uj in zip(b_row[1:], u[1:]):
             bu = bu + b * uj
-        x_next.append(((x[source] if source >= 0 else 0.0) + ky) + bu)
+        x_next.append(((x[source] + ky) if source >= 0 else ky) + bu)
     return x_next
 
 
@@ -197,7 +198,7 @@ def step_floats(x: list, linkage: list, valve: list, command: list, p: StepParam
 
 def valves_arrays(linkage: np.ndarray, valve: np.ndarray, command: np.ndarray, half: float, stick: float):
     """Backlash then stiction for N engines' valves, (m, N) arrays. Returns (linkage, valve)."""
-    linkage = np.clip(linkage, command - half, command + half) if half else command
+    linkage = np.minimum(np.maximum(linkage, command - half), command + half) if half else command
     valve = np.where(np.abs(linkage - valve) > stick, linkage, valve) if stick else linkage
     return linkage, valve
 
@@ -209,17 +210,18 @@ def dynamics_arrays(
     B (n, m), or (n, p, N) and (n, m, N) for one model per engine."""
     n_out = k_gain.shape[1]
     y = x[x.shape[0] - n_out :]
-    ky = _column(k_gain, 0) * y[0]
+    scratch = np.empty((x.shape[0], x.shape[1]))
+    x_next = np.multiply(_column(k_gain, 0), y[0])
     for j in range(1, n_out):
-        ky = ky + _column(k_gain, j) * y[j]
-    bu = _column(b_gain, 0) * u[0]
-    for j in range(1, b_gain.shape[1]):
-        bu = bu + _column(b_gain, j) * u[j]
-    shifted = np.zeros_like(ky)
-    for i, source in enumerate(shift_source):
+        x_next += np.multiply(_column(k_gain, j), y[j], out=scratch)
+    for i, source in enumerate(shift_source):  # the shift part of A_o: x_i += x_src(i)
         if source >= 0:
-            shifted[i] = x[source]
-    return (shifted + ky) + bu
+            x_next[i] += x[source]
+    bu = np.multiply(_column(b_gain, 0), u[0])
+    for j in range(1, b_gain.shape[1]):
+        bu += np.multiply(_column(b_gain, j), u[j], out=scratch)
+    x_next += bu
+    return x_next
 
 
 def step_arrays(
