@@ -258,6 +258,22 @@ def test_render_rgb_array():
     env.close()
 
 
+def test_render_human_draws_each_step():
+    import matplotlib
+
+    matplotlib.use("Agg")  # no display here: the same drawing, shown nowhere
+    env = gym.make(TRACKING, render_mode="human")
+    env.reset(seed=0)
+    for _ in range(3):
+        env.step(env.action_space.sample())
+    assert env.render() is None
+    figure = env.unwrapped._figure
+    pc_axis, _, valve_axis = figure.axes
+    assert [len(line.get_xdata()) for line in pc_axis.lines] == [4, 4]  # Pc and its reference
+    assert len(valve_axis.lines) == 2
+    env.close()
+
+
 def test_sb3_trains_on_the_native_vector_env():
     from stable_baselines3 import PPO
 
