@@ -25,6 +25,12 @@ def _register() -> None:
         vector_entry_point="ssme_envs.envs.vector:EngineThrottleVectorEnv",
         max_episode_steps=1500,
     )
+    register(
+        id="ssme_envs/NozzleTVC-v0",
+        entry_point="ssme_envs.envs.nozzle_tvc:NozzleTVCEnv",
+        vector_entry_point="ssme_envs.envs.vector:NozzleTVCVectorEnv",
+        max_episode_steps=500,
+    )
 
 
 _register()

@@ -2,6 +2,20 @@
 
 from ssme_envs.envs.engine_throttle import EngineThrottleEnv
 from ssme_envs.envs.engine_tracking import EngineTrackingEnv
-from ssme_envs.envs.vector import EngineThrottleVectorEnv, EngineTrackingVectorEnv
+from ssme_envs.envs.nozzle_tvc import NozzleTVCEnv
+from ssme_envs.envs.vector import (
+    EngineThrottleVectorEnv,
+    EngineTrackingVectorEnv,
+    NozzleTVCVectorEnv,
+    TrackingVectorEnv,
+)
 
-__all__ = ["EngineThrottleEnv", "EngineThrottleVectorEnv", "EngineTrackingEnv", "EngineTrackingVectorEnv"]
+__all__ = [
+    "EngineThrottleEnv",
+    "EngineThrottleVectorEnv",
+    "EngineTrackingEnv",
+    "EngineTrackingVectorEnv",
+    "NozzleTVCEnv",
+    "NozzleTVCVectorEnv",
+    "TrackingVectorEnv",
+]

@@ -164,6 +164,23 @@ class EngineTask:
                 f"fault time {self.fault.time:g} s is beyond the episode ({self.horizon * self.dt:g} s)"
             )
 
+    n_actions = 2  # OPOV, FPOV
+    n_channels = 2  # Pc, MR
+
+    @staticmethod
+    def observation_space() -> gym.spaces.Box:
+        return observation_space()
+
+    def zero_state(self, n: int) -> list:
+        """[plant state, error integrals, previous actions, held command] of n envs at reset."""
+        return [self.initial_plant_arrays(n), np.zeros((2, n)), np.zeros((2, n)), np.zeros(n)]
+
+    def initial_observation(self, ref: np.ndarray, draws: np.ndarray) -> np.ndarray:
+        return initial_observation(self, ref, draws)
+
+    def batch_step(self, *args: Any) -> tuple:
+        return batch_step(self, *args)
+
     @property
     def shared_references(self) -> np.ndarray | None:
         """References common to every episode, (horizon + 1, 2), or None when drawn per episode."""

@@ -8,11 +8,13 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
+from functools import cache
 from typing import Any
 
 import numpy as np
+from scipy import signal
 
-REFERENCE_KINDS = ("random_steps", "step", "ramp", "prbs", "zero")
+REFERENCE_KINDS = ("random_steps", "step", "ramp", "prbs", "sine_sweep", "attitude", "zero")
 FAULT_KINDS = ("stuck_valve", "sensor_bias", "gain_loss")
 
 
@@ -20,8 +22,10 @@ def uniforms_needed(kind: str, length: int, channels: int, dt: float) -> int:
     """How many uniform numbers :func:`reference_signals` consumes for one episode."""
     if kind == "zero":
         return 0
-    if kind == "random_steps":
+    if kind in ("random_steps", "attitude"):
         return _hold_count(length, dt) * (1 + channels)
+    if kind == "sine_sweep":
+        return channels
     if kind == "step":
         return 1 + channels
     if kind == "ramp":
@@ -48,6 +52,10 @@ def reference_signals(
     step : zero, then one step to a random level at a random time in the first 40 % of the episode.
     ramp : zero, then a ramp to a random level over 1 to 4 s, starting in the first 30 %.
     prbs : +-amplitude per channel, switching with probability dt / 0.5 s each step.
+    sine_sweep : a sine from 0.2 Hz to 5 Hz (frequency linear in time over the episode), its
+        amplitude uniform in 50-100 % of ``amplitude``.
+    attitude : smooth commands like an attitude controller's: random steps through a critically
+        damped second-order filter with a 1 Hz natural frequency.
     zero : regulation about the operating point.
 
     Every episode is computed from its own column alone, so one episode drawn by itself equals
@@ -58,6 +66,15 @@ def reference_signals(
     scale = amplitude[:, None, None]
     if kind == "zero":
         return np.zeros((channels, length, k))
+    if kind == "sine_sweep":
+        time = np.arange(length) * dt
+        f0, f1, duration = 0.2, 5.0, max(time[-1], dt)
+        wave = np.sin(2.0 * np.pi * (f0 * time + (f1 - f0) * time**2 / (2.0 * duration)))
+        level = (0.5 + 0.5 * uniforms) * amplitude[:, None]
+        return wave[None, :, None] * level[:, None, :]
+    if kind == "attitude":
+        steps_ = reference_signals("random_steps", uniforms, length, amplitude, dt)
+        return signal.lfilter(*_attitude_filter(dt), steps_, axis=1)
     if kind == "random_steps":
         count = _hold_count(length, dt)
         shortest, longest = round(1.0 / dt), round(3.0 / dt)
@@ -91,6 +108,14 @@ def reference_signals(
             _accumulate_rows(flips[c], np.logical_xor)  # odd number of flips so far
         return np.where(flips, -1.0, 1.0) * start[:, None, :] * scale
     raise ValueError(f"unknown reference kind {kind!r}; choose one of {', '.join(REFERENCE_KINDS)}")
+
+
+@cache
+def _attitude_filter(dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """Zero-order-hold discretization of w^2 / (s + w)^2, w = 2 pi rad/s, unit DC gain."""
+    omega = 2.0 * np.pi
+    num, den, _ = signal.cont2discrete(([omega**2], [1.0, 2.0 * omega, omega**2]), dt, method="zoh")
+    return np.ravel(num), np.asarray(den, dtype=float)
 
 
 def _accumulate_rows(table: np.ndarray, operation: np.ufunc = np.add) -> None:

@@ -1,8 +1,12 @@
-"""Native vector environments: N engines stepped as arrays by the same step function.
+"""Native vector environments: N plants stepped as arrays by their task's batched step.
 
-Sub-env ``i`` is seeded with ``seed + i`` and draws its episodes from its own generator exactly
-as the scalar env does, so the vector env equals gymnasium's ``SyncVectorEnv`` of the scalar env
-bit for bit, in either autoreset mode.
+One class, :class:`TrackingVectorEnv`, serves every tracking task (engine, throttle, nozzle).
+A task provides ``horizon``, ``n_actions``, ``observation_space()``, ``draw_size``,
+``episodes(uniforms, noise_out)``, ``shared_references``, ``zero_state(n)``,
+``initial_observation(refs, noise)`` and ``batch_step(state, actions, t, refs, noise, synced,
+low, high)``. Sub-env ``i`` is seeded with ``seed + i`` and draws its episodes from its own
+generator exactly as the scalar env does, so the vector env equals gymnasium's
+``SyncVectorEnv`` of the scalar env bit for bit, in either autoreset mode.
 """
 
 from __future__ import annotations
@@ -17,11 +21,12 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from ssme_envs.envs.engine_throttle import ThrottleTask
-from ssme_envs.envs.engine_tracking import EngineTask, batch_step, initial_observation, observation_space
+from ssme_envs.envs.engine_tracking import EngineTask
+from ssme_envs.envs.nozzle_tvc import NozzleTask
 
 
-class EngineTrackingVectorEnv(VectorEnv):
-    """``num_envs`` copies of :class:`~ssme_envs.envs.engine_tracking.EngineTrackingEnv` as one batch.
+class TrackingVectorEnv(VectorEnv):
+    """``num_envs`` copies of a tracking env as one batch (subclasses name the task).
 
     Options are those of the scalar env; ``autoreset_mode`` is gymnasium's NEXT_STEP (default,
     like ``SyncVectorEnv``) or SAME_STEP (final observation in ``info["final_obs"]``);
@@ -29,7 +34,7 @@ class EngineTrackingVectorEnv(VectorEnv):
     """
 
     metadata = {"render_modes": [], "autoreset_mode": AutoresetMode.NEXT_STEP}
-    build_task = staticmethod(EngineTask.build)
+    build_task: Any = None  # the task's constructor, set by each subclass
 
     def __init__(
         self,
@@ -57,43 +62,35 @@ class EngineTrackingVectorEnv(VectorEnv):
         self.num_envs = num_envs
         self.metadata = {**self.metadata, "autoreset_mode": mode}
         self.render_mode = None
-        self.single_action_space = gym.spaces.Box(-1.0, 1.0, (2,), dtype=np.float32)
+        self.single_action_space = gym.spaces.Box(-1.0, 1.0, (self.task.n_actions,), dtype=np.float32)
         self.action_space = batch_space(self.single_action_space, num_envs)
-        self.single_observation_space = observation_space()
+        self.single_observation_space = self.task.observation_space()
         self.observation_space = batch_space(self.single_observation_space, num_envs)
         self._low, self._high = self.single_observation_space.low, self.single_observation_space.high
-        n, length = num_envs, self.task.horizon + 1
+        n, length, channels = num_envs, self.task.horizon + 1, self.task.n_channels
         self._rngs: list[np.random.Generator] = [seeding.np_random(None)[0] for _ in range(n)]
         # Episode data with the env axis last: one step's values of every env are contiguous.
         # References common to every episode (the throttle profile) are not stored per env.
         self._shared_refs = self.task.shared_references
         if self._shared_refs is not None:
-            self._shared_refs_by_step = np.ascontiguousarray(self._shared_refs.T)  # (2, T + 1)
-        self._refs = None if self._shared_refs is not None else np.zeros((2, length, n))
-        self._noise = np.zeros((2, length, n), dtype=np.float32)  # unit draws, scaled at each step
+            self._shared_refs_by_step = np.ascontiguousarray(self._shared_refs.T)  # (channels, T + 1)
+        self._refs = None if self._shared_refs is not None else np.zeros((channels, length, n))
+        self._noise = np.zeros((channels, length, n), dtype=np.float32)  # unit draws, scaled at each step
         self._draws: np.ndarray | None = None  # (N, draw_size) and transposed, made at first reset
         self._uniforms: np.ndarray | None = None
         self._t = np.zeros(n, dtype=np.int64)
         self._synced = True  # every env at the same step: reads are slices, not gathers
         self._rows = np.arange(n)
-        self._state = self._zero_state(n)
+        self._state = self.task.zero_state(n)
         self._autoreset = np.zeros(n, dtype=bool)
-
-    def _zero_state(self, n: int) -> list:
-        """[plant state, error integrals, previous actions, held command] for n envs."""
-        return [self.task.initial_plant_arrays(n), np.zeros((2, n)), np.zeros((2, n)), np.zeros(n)]
 
     def _restart(self, envs: np.ndarray) -> np.ndarray:
         """Zero the state of the given envs and draw their next episodes; their first observations."""
         task, k = self.task, len(envs)
         if k == self.num_envs:
-            self._state = self._zero_state(k)
+            self._state = task.zero_state(k)
         else:
-            fresh = self._zero_state(k)
-            for block, new in zip(self._state[0], fresh[0], strict=True):
-                block[..., envs] = new
-            for block, new in zip(self._state[1:], fresh[1:], strict=True):
-                block[..., envs] = new
+            _set_columns(self._state, task.zero_state(k), envs)
         # Buffers reused from episode to episode: fresh tens of MB would cost page faults.
         if self._draws is None:
             self._draws = np.empty((self.num_envs, task.draw_size), dtype=np.float32)
@@ -112,7 +109,7 @@ class EngineTrackingVectorEnv(VectorEnv):
                 self._refs[:, :, envs] = refs
         self._t[envs] = 0
         self._synced = bool((self._t == self._t[0]).all())
-        obs = initial_observation(task, refs[:, 0], noise[:, 0]).T
+        obs = task.initial_observation(refs[:, 0], noise[:, 0]).T
         return np.clip(obs, self._low, self._high)
 
     def reset(self, *, seed: int | list[int | None] | None = None, options: dict | None = None):
@@ -130,15 +127,16 @@ class EngineTrackingVectorEnv(VectorEnv):
 
     def step(self, actions: np.ndarray):
         acts = np.asarray(actions, dtype=np.float64)
-        if acts.shape != (self.num_envs, 2):
-            raise ValueError(f"actions must have shape ({self.num_envs}, 2), got {acts.shape}")
+        shape = (self.num_envs, self.task.n_actions)
+        if acts.shape != shape:
+            raise ValueError(f"actions must have shape {shape}, got {acts.shape}")
         if not math.isfinite(acts.sum()):  # one reduction; the element search only on failure
             bad = np.argwhere(~np.isfinite(acts))
             if bad.size:
                 raise ValueError(
                     f"action of env {bad[0, 0]} must be finite, got {acts[bad[0, 0]].tolist()} (NaN or inf)"
                 )
-        clipped = np.empty((2, self.num_envs))  # state-major and contiguous, as the core wants
+        clipped = np.empty(shape[::-1])  # state-major and contiguous, as the core wants
         np.maximum(acts.T, -1.0, out=clipped)
         np.minimum(clipped, 1.0, out=clipped)
         task = self.task
@@ -150,13 +148,13 @@ class EngineTrackingVectorEnv(VectorEnv):
             refs = self._refs[:, t[0]] if self._refs is not None else self._shared_refs[t[0], :, None]
         else:  # one flat index for both tables: take is much faster than fancy indexing
             flat = t * self.num_envs + self._rows
-            noise = np.take(self._noise.reshape(2, -1), flat, axis=1)
+            noise = np.take(self._noise.reshape(len(self._noise), -1), flat, axis=1)
             if self._refs is None:
                 refs = np.take(self._shared_refs_by_step, t, axis=1)
             else:
-                refs = np.take(self._refs.reshape(2, -1), flat, axis=1)
-        self._state, obs, reward, terminated = batch_step(
-            task, self._state, clipped, t, refs, noise, self._synced, self._low, self._high
+                refs = np.take(self._refs.reshape(len(self._refs), -1), flat, axis=1)
+        self._state, obs, reward, terminated = task.batch_step(
+            self._state, clipped, t, refs, noise, self._synced, self._low, self._high
         )
         truncated = t >= self._limit
         infos: dict[str, Any] = {}
@@ -197,7 +195,28 @@ def _transpose(table: np.ndarray, out: np.ndarray | None = None, tile: int = 256
     return out
 
 
-class EngineThrottleVectorEnv(EngineTrackingVectorEnv):
+def _set_columns(state: list, fresh: list, envs: np.ndarray) -> None:
+    """Write the columns (last axis) ``envs`` of every array in a nested state list."""
+    for block, new in zip(state, fresh, strict=True):
+        if isinstance(block, list):
+            _set_columns(block, new, envs)
+        else:
+            block[..., envs] = new
+
+
+class EngineTrackingVectorEnv(TrackingVectorEnv):
+    """``num_envs`` copies of :class:`~ssme_envs.envs.engine_tracking.EngineTrackingEnv` as one batch."""
+
+    build_task = staticmethod(EngineTask.build)
+
+
+class EngineThrottleVectorEnv(TrackingVectorEnv):
     """``num_envs`` copies of :class:`~ssme_envs.envs.engine_throttle.EngineThrottleEnv` as one batch."""
 
     build_task = staticmethod(ThrottleTask.build_throttle)
+
+
+class NozzleTVCVectorEnv(TrackingVectorEnv):
+    """``num_envs`` copies of :class:`~ssme_envs.envs.nozzle_tvc.NozzleTVCEnv` as one batch."""
+
+    build_task = staticmethod(NozzleTask.build)

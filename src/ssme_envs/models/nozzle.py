@@ -181,8 +181,8 @@ class NozzleCore:
         self._beta, self._gamma, self._pow = p["beta_n"], p["gamma_n"], p["n"]
         hysteretic = bool(np.any(self._k_hys != 0))
         arrays = (self._inv_j, self._b, self._k_el, self._k_hys, self._beta, self._gamma, self._pow)
-        self._params = (*arrays, hysteretic, np.power)
-        self._scalar_params = (*(float(q[0]) for q in arrays), hysteretic, _float_power)
+        self._params = (*arrays, hysteretic, np.power, np.sign)
+        self._scalar_params = (*(float(q[0]) for q in arrays), hysteretic, _float_power, _float_sign)
         self.dt = float(dt)
         self.substeps = int(substeps)
         self.torque_limit = float(torque_limit)
@@ -273,13 +273,17 @@ def _float_power(base: float, exponent: float) -> float:
     return float(np.power(base, exponent))
 
 
+def _float_sign(q: float) -> float:
+    return (q > 0) * 1.0 - (q < 0) * 1.0  # np.sign's value for any non-NaN float
+
+
 def _rk4(x, v, w, tau, h: float, steps: int, params: tuple):
     """``steps`` RK4 steps of length h of the normalized nozzle equations.
 
     Written with arithmetic operators only, so that it runs on floats (one nozzle) and on
-    arrays (a batch) alike; the sign is ``(q > 0) - (q < 0)`` for the same reason.
+    arrays (a batch) alike; power and sign come with the parameters, one per carrier.
     """
-    inv_j, b, k_el, k_hys, beta, gamma, power, hysteretic, power_fn = params
+    inv_j, b, k_el, k_hys, beta, gamma, power, hysteretic, power_fn, sign_fn = params
 
     def deriv(x, v, w):
         accel = (tau - b * v - k_el * x - k_hys * w) * inv_j
@@ -287,7 +291,7 @@ def _rk4(x, v, w, tau, h: float, steps: int, params: tuple):
             return v, accel, v
         q = v * w
         mag = power_fn(abs(w), power)
-        return v, accel, v * (1.0 - mag * (beta + gamma * ((q > 0) * 1.0 - (q < 0) * 1.0)))
+        return v, accel, v * (1.0 - mag * (beta + gamma * sign_fn(q)))
 
     half, sixth = 0.5 * h, h / 6.0
     for _ in range(steps):

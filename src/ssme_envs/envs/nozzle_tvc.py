@@ -1,0 +1,396 @@
+"""Nozzle deflection tracking through a torque actuator and a hysteretic flexible joint."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import SimpleNamespace
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from ssme_envs.envs.references import REFERENCE_KINDS, Fault, reference_signals, uniforms_needed, unit_normals
+from ssme_envs.models.nozzle import (
+    DEFAULT_SUBSTEPS,
+    DEFAULT_TORQUE_LIMIT,
+    NOZZLE_DT,
+    NozzleCore,
+    NozzleModel,
+    NozzleParameters,
+    _rk4,
+    identified_nozzle,
+    published_nozzle,
+    recommended_substeps,
+)
+
+DEG = 180.0 / math.pi
+NOZZLE_FAULTS = ("sensor_bias", "gain_loss")
+OBS_NAMES = ("angle_deg", "rate_deg_s", "ref_deg", "err_deg", "err_int_deg_s", "prev_action")
+
+# The step below runs on Python floats (one env) and on (N,) arrays (the vector env) with the
+# same IEEE operations; only selection and clipping differ by carrier.
+FLOAT_OPS = SimpleNamespace(
+    where=lambda cond, a, b: a if cond else b, clip=lambda x, lo, hi: min(max(x, lo), hi)
+)
+ARRAY_OPS = SimpleNamespace(where=np.where, clip=lambda x, lo, hi: np.minimum(np.maximum(x, lo), hi))
+
+
+def resolve_nozzle(plant: str | Path | NozzleParameters | NozzleModel) -> NozzleParameters:
+    """The joint behind the env: ``"bouc_wen"`` (Table 1's hysteretic joint, the truth),
+    ``"linear"`` (Table 1's linear row), ``"identified"`` (the packaged model identified from
+    the bench test), a nozzle model.json path, or a parameter/model object."""
+    if isinstance(plant, NozzleParameters):
+        return plant
+    if isinstance(plant, NozzleModel):
+        return plant.plant()
+    if plant in ("bouc_wen", "linear"):
+        return published_nozzle(str(plant))
+    if plant == "identified":
+        return identified_nozzle().plant()
+    if isinstance(plant, str | Path) and str(plant).endswith(".json"):
+        return NozzleModel.load(plant).plant()
+    raise ValueError(
+        "plant must be 'bouc_wen', 'linear', 'identified', a nozzle model.json path or a model, "
+        f"got {plant!r}"
+    )
+
+
+def _number(name: str, value: Any, low: float, high: float, low_open: bool = False) -> float:
+    ok = isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
+    if not ok or value > high or value < low or (low_open and value == low):
+        bracket = "(" if low_open else "["
+        raise ValueError(f"{name} must be a number in {bracket}{low:g}, {high:g}], got {value!r}")
+    return float(value)
+
+
+@dataclass(frozen=True)
+class NozzleTask:
+    """Everything a nozzle tracking episode needs, shared by the scalar and the vector env."""
+
+    plant: NozzleParameters
+    substeps: int
+    horizon: int
+    reference: str
+    amplitude: np.ndarray  # (1,), rad
+    noise_std: float  # rad
+    fault: Fault | None
+    torque_limit: float = DEFAULT_TORQUE_LIMIT  # N m, the action's full scale
+    lag_gain: float = 1.0  # 1 - exp(-dt / lag): first-order actuator lag per step (1: none)
+    max_torque_change: float = math.inf  # N m per step, the rate limit
+    dt: float = NOZZLE_DT
+    error_weight: float = 0.1
+    rate_weight: float = 0.1
+    envelope: float = math.radians(6.0)  # |angle| that ends an episode (twice the working range)
+    integral_limit: float = 10.0  # deg s
+    float_params: tuple = field(init=False, repr=False)
+    array_params: tuple = field(init=False, repr=False)
+    fault_step: int = field(init=False)
+
+    n_actions = 1
+    n_channels = 1
+
+    @classmethod
+    def build(
+        cls,
+        plant: str | Path | NozzleParameters | NozzleModel = "bouc_wen",
+        reference: str = "random_steps",
+        reference_amplitude_deg: float = 3.0,
+        sensor_noise: float = 1e-4,
+        fault: dict | Fault | None = None,
+        episode_seconds: float = 4.0,
+        actuator_lag: float = 0.0,
+        rate_limit: float | None = None,
+        substeps: int | None = None,
+    ) -> NozzleTask:
+        params = resolve_nozzle(plant)
+        if reference not in REFERENCE_KINDS:
+            raise ValueError(f"unknown reference {reference!r}; choose one of {', '.join(REFERENCE_KINDS)}")
+        amplitude = _number("reference_amplitude_deg", reference_amplitude_deg, 0.0, 3.0)
+        noise = _number("sensor_noise", sensor_noise, 0.0, 0.01)
+        seconds = _number("episode_seconds", episode_seconds, 0.1, 3600.0)
+        lag = _number("actuator_lag", actuator_lag, 0.0, 1.0)
+        if rate_limit is not None:
+            rate_limit = _number("rate_limit", rate_limit, 0.0, math.inf, low_open=True)
+        envelope = math.radians(6.0)
+        if substeps is None:
+            substeps = max(DEFAULT_SUBSTEPS, recommended_substeps(params, NOZZLE_DT, envelope))
+        elif not isinstance(substeps, int) or isinstance(substeps, bool) or not 1 <= substeps <= 1000:
+            raise ValueError(f"substeps must be an integer in 1-1000, got {substeps!r}")
+        parsed = Fault.parse(fault, 1, 1)
+        if parsed is not None and parsed.kind not in NOZZLE_FAULTS:
+            raise ValueError(
+                f"unknown fault kind {parsed.kind!r} for the nozzle; choose one of {NOZZLE_FAULTS}"
+            )
+        return cls(
+            plant=params,
+            substeps=substeps,
+            horizon=round(seconds / NOZZLE_DT),
+            reference=reference,
+            amplitude=np.array([math.radians(amplitude)]),
+            noise_std=noise,
+            fault=parsed,
+            lag_gain=1.0 if lag == 0 else -math.expm1(-NOZZLE_DT / lag),
+            max_torque_change=math.inf if rate_limit is None else rate_limit * NOZZLE_DT,
+            envelope=envelope,
+        )
+
+    def __post_init__(self) -> None:
+        core = NozzleCore(self.plant, 1, self.dt, self.substeps, self.torque_limit)
+        object.__setattr__(self, "float_params", core._scalar_params)
+        object.__setattr__(self, "array_params", core._params)
+        object.__setattr__(
+            self, "fault_step", round(self.fault.time / self.dt) if self.fault is not None else -1
+        )
+        if self.fault is not None and self.fault_step >= self.horizon:
+            raise ValueError(
+                f"fault time {self.fault.time:g} s is beyond the episode ({self.horizon * self.dt:g} s)"
+            )
+
+    @staticmethod
+    def observation_space() -> gym.spaces.Box:
+        high = np.array([20, 2000, 10, 30, 10, 1], dtype=np.float32)
+        return gym.spaces.Box(-high, high, dtype=np.float32)
+
+    @property
+    def step_cost_bound(self) -> float:
+        """Largest reward loss of one step inside the envelope (with 1 deg for noise)."""
+        bias = abs(self.fault.magnitude) if self.fault is not None and self.fault.kind == "sensor_bias" else 0
+        error = DEG * (self.envelope + float(self.amplitude[0]) + bias) + 1.0
+        return self.error_weight * error**2 + self.rate_weight * 2.0**2
+
+    @property
+    def shared_references(self) -> None:
+        return None
+
+    @property
+    def draw_size(self) -> int:
+        """Uniform float32 numbers one episode consumes: sensor noise (an even count for the
+        Box-Muller pairs), then the reference's."""
+        length = self.horizon + 1
+        return length + length % 2 + uniforms_needed(self.reference, length, 1, self.dt)
+
+    def episodes(
+        self, uniforms: np.ndarray, noise_out: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """References (1, horizon + 1, k) in rad and unit noise (1, horizon + 1, k) float32 of k
+        episodes from their uniforms (draw_size, k) float32, as for the engine tasks."""
+        length = self.horizon + 1
+        uniforms = np.ascontiguousarray(uniforms, dtype=np.float32)
+        pairs = length + length % 2
+        noise = unit_normals(uniforms[:pairs])[:length][None]
+        if noise_out is not None:
+            noise_out[...] = noise
+            noise = noise_out
+        refs = reference_signals(
+            self.reference, uniforms[pairs:].astype(np.float64), length, self.amplitude, self.dt
+        )
+        return refs, noise
+
+    def zero_state(self, n: int) -> list:
+        """[angle, rate, hysteresis w, actuator torque, last measurement, error integral,
+        previous action], each (n,), at rest (the rate estimate starts from the rest angle)."""
+        return [np.zeros(n) for _ in range(7)]
+
+    def initial_observation(self, ref: np.ndarray, draws: np.ndarray) -> np.ndarray:
+        """Observations at reset (6, N) float32 from the first reference and noise rows (1, N)."""
+        m = self._measure(0.0, np.asarray(draws[0], dtype=np.float64), 0, ARRAY_OPS)
+        e = (ref[0] - m) * DEG
+        zeros = np.zeros_like(m)
+        return np.stack([m * DEG, zeros, ref[0] * DEG, e, zeros, zeros]).astype(np.float32)
+
+    def _measure(self, x: Any, noise: Any, t: Any, ops: SimpleNamespace) -> Any:
+        m = x + noise * self.noise_std
+        fault = self.fault
+        if fault is not None and fault.kind == "sensor_bias":
+            m = ops.where(t >= self.fault_step, m + fault.magnitude, m)
+        return m
+
+    def step(self, state: list, a: Any, t: Any, ref: Any, noise: Any, ops: SimpleNamespace) -> tuple:
+        """One step on floats (``FLOAT_OPS``) or (N,) arrays (``ARRAY_OPS``): action ``a`` in
+        [-1, 1], ``t`` the step index after this step, ``ref`` (rad) and unit ``noise`` at t.
+        Returns (state, observation values, reward, terminated)."""
+        x, v, w, torque, m_prev, integral, prev = state
+        cmd = a * self.torque_limit
+        fault = self.fault
+        if fault is not None and fault.kind == "gain_loss":
+            cmd = ops.where(t > self.fault_step, cmd * fault.magnitude, cmd)
+        target = cmd if self.lag_gain == 1.0 else torque + self.lag_gain * (cmd - torque)
+        if math.isinf(self.max_torque_change):
+            torque = target
+        else:
+            limit = self.max_torque_change
+            torque = torque + ops.clip(target - torque, -limit, limit)
+        x, v, w = _rk4(
+            x,
+            v,
+            w,
+            torque,
+            self.dt / self.substeps,
+            self.substeps,
+            self.float_params if ops is FLOAT_OPS else self.array_params,
+        )
+        m = self._measure(x, noise, t, ops)
+        e = (ref - m) * DEG
+        rate = (m - m_prev) * (DEG / self.dt)
+        lim = self.integral_limit
+        integral = ops.clip(integral + e * self.dt, -lim, lim)
+        d = a - prev
+        terminated = abs(x) > self.envelope
+        reward = -self.error_weight * (e * e) - self.rate_weight * (d * d)
+        reward = reward - (self.step_cost_bound * (self.horizon - t + 1)) * terminated
+        obs = (m * DEG, rate, ref * DEG, e, integral, a)
+        return [x, v, w, torque, m, integral, a], obs, reward, terminated
+
+    def batch_step(
+        self,
+        state: list,
+        acts: np.ndarray,
+        t: np.ndarray,
+        ref: np.ndarray,
+        noise: np.ndarray,
+        synced: bool,
+        low: np.ndarray,
+        high: np.ndarray,
+    ) -> tuple:
+        """N envs, one step: acts, ref, noise (1, N) (ref may be (1, 1)); observations (N, 6)."""
+        state, obs, reward, terminated = self.step(
+            state, acts[0], t, ref[0], noise[0].astype(np.float64), ARRAY_OPS
+        )
+        n = acts.shape[1]
+        out = np.stack([np.broadcast_to(row, (n,)) for row in obs], axis=1).astype(np.float32)
+        np.maximum(out, low, out=out)
+        np.minimum(out, high, out=out)
+        return state, out, np.asarray(reward, dtype=np.float64), terminated
+
+
+class NozzleTVCEnv(gym.Env):
+    """Track a nozzle deflection command with the actuator torque (thrust-vector control).
+
+    The plant is the movable nozzle of the VLS launcher's first stage: ``J x'' + b x' + F = tau``
+    with the flexible joint's restoring torque F hysteretic (Bouc-Wen, Table 1 of the nozzle
+    paper) by default, or linear, or any nozzle model.json; RK4 with ``substeps`` per 0.008 s step
+    (4 by default: within 2e-4 deg of a fine-step simulation, tested). Angles in degrees.
+
+    ## Action Space
+    ``Box(-1, 1, (1,), float32)``: the torque command as a fraction of the actuator's full scale
+    (3e4 N m, about 4x the torque of a static 3 deg deflection). Optional first-order
+    ``actuator_lag`` (s) and ``rate_limit`` (N m/s). Out-of-range actions are clipped; NaN or
+    inf raises ValueError.
+
+    ## Observation Space
+    ``Box((6,), float32)``, finite bounds, clipped into them:
+
+    | index | observation | unit | bound |
+    |---|---|---|---|
+    | 0 | measured angle (sensor noise ``sensor_noise`` rad) | deg | +-20 |
+    | 1 | rate estimate (difference of measured angles) | deg/s | +-2000 |
+    | 2 | reference | deg | +-10 |
+    | 3 | tracking error (reference - measured) | deg | +-30 |
+    | 4 | integral of the error (anti-windup at +-10) | deg s | +-10 |
+    | 5 | previous action | - | +-1 |
+
+    ## Rewards
+    ``-0.1 e^2 - 0.1 (a_k - a_(k-1))^2`` with the error in degrees. Leaving the envelope (true
+    angle beyond 6 deg) ends the episode with a penalty larger than the worst cost of all
+    remaining steps, so ending early never pays.
+
+    ## Starting State
+    At rest: zero angle, rate, hysteresis state and torque.
+
+    ## Episode End
+    Termination on leaving the envelope; truncation after ``episode_seconds`` (4 s, 500 steps).
+
+    ## Arguments
+    plant : "bouc_wen" (default), "linear", "identified", a nozzle model.json path or a model.
+    reference : "random_steps" (default), "step", "ramp", "prbs", "sine_sweep", "attitude",
+    "zero"; reference_amplitude_deg (0-3, default 3). sensor_noise (rad, default 1e-4). fault :
+    ``{"kind": "gain_loss", "time": 2.0, "magnitude": 0.5}`` or ``{"kind": "sensor_bias", "time":
+    2.0, "magnitude": 0.005}`` (rad). episode_seconds, actuator_lag, rate_limit, substeps.
+    render_mode : "human" or "rgb_array".
+    """
+
+    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 25}
+    build_task: Callable[..., NozzleTask] = staticmethod(NozzleTask.build)
+
+    def __init__(self, render_mode: str | None = None, **options: Any) -> None:
+        self.task = self.build_task(**options)
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(
+                f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}"
+            )
+        self.render_mode = render_mode
+        self.action_space = gym.spaces.Box(-1.0, 1.0, (1,), dtype=np.float32)
+        self.observation_space = self.task.observation_space()
+        self._low, self._high = self.observation_space.low, self.observation_space.high
+        self._history: list[list[float]] = []
+        self._figure = None
+        self._t = 0
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[np.ndarray, dict]:
+        super().reset(seed=seed)
+        uniforms = self.np_random.random(self.task.draw_size, dtype=np.float32)
+        refs, noise = self.task.episodes(uniforms[:, None])
+        self._refs = refs[0, :, 0].tolist()
+        self._noise = noise[0, :, 0].astype(np.float64).tolist()
+        obs = np.clip(self.task.initial_observation(refs[:, 0], noise[:, 0])[:, 0], self._low, self._high)
+        self._state = [0.0] * 7
+        self._t = 0
+        if self.render_mode:
+            self._history = [[float(obs[0]) / DEG, self._refs[0], 0.0]]
+        return obs, {}
+
+    def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict]:
+        try:
+            if len(action) != 1:
+                raise ValueError
+            a = float(action[0])
+        except (TypeError, ValueError, IndexError):
+            raise ValueError(f"action must be 1 number (the torque command), got {action!r}") from None
+        if not math.isfinite(a):
+            raise ValueError(f"action must be finite, got {a} (NaN or inf)")
+        if self._t >= self.task.horizon:
+            raise ValueError("the episode is over (truncated): call reset() before step()")
+        a = min(max(a, -1.0), 1.0)
+        t = self._t + 1
+        self._state, obs, reward, terminated = self.task.step(
+            self._state, a, t, self._refs[t], self._noise[t], FLOAT_OPS
+        )
+        self._t = t
+        if self.render_mode:
+            self._history.append([obs[0] / DEG, self._refs[t], self._state[3] / self.task.torque_limit])
+            if self.render_mode == "human":
+                self.render()
+        out = np.array(obs, dtype=np.float32)
+        np.minimum(np.maximum(out, self._low, out=out), self._high, out=out)
+        return out, float(reward), bool(terminated), t >= self.task.horizon, {}
+
+    def render(self) -> np.ndarray | None:
+        if self.render_mode is None:
+            gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array' or 'human'")
+            return None
+        from ssme_envs.envs.rendering import render_history
+
+        image, self._figure = render_history(
+            np.array(self._history),
+            self.task.dt,
+            self._figure,
+            self.render_mode,
+            ("nozzle angle",),
+            ("torque",),
+            scale=DEG,
+            units=("deg", "fraction of full scale"),
+        )
+        return image
+
+    def close(self) -> None:
+        if self._figure is not None:
+            from ssme_envs.envs.rendering import close_figure
+
+            close_figure(self._figure)
+            self._figure = None
+
+
+__all__ = ["NozzleTVCEnv", "NozzleTask", "resolve_nozzle"]
