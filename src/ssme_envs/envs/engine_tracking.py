@@ -18,6 +18,7 @@ from ssme_envs.envs.references import (
     uniforms_needed,
     unit_normals,
 )
+from ssme_envs.envs.rendering import HistoryRendering
 from ssme_envs.models.engine import (
     POWER_LEVELS,
     StepParameters,
@@ -389,7 +390,7 @@ def check_action_values(a0: float, a1: float) -> None:
         raise ValueError(f"action must be finite, got {[a0, a1]} (NaN or inf)")
 
 
-class EngineTrackingEnv(gym.Env):
+class EngineTrackingEnv(HistoryRendering, gym.Env):
     """Track chamber pressure (Pc) and mixture ratio (MR) with the OPOV and FPOV valves.
 
     The plant is an SSME point model (NASA TM-104422) at one power level, 0.04 s per step: by
@@ -440,21 +441,12 @@ class EngineTrackingEnv(gym.Env):
     """
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 25}
+    output_names = ("Pc", "MR")
+    actuator_names = ("OPOV", "FPOV")
     build_task = staticmethod(EngineTask.build)
 
     def __init__(self, render_mode: str | None = None, **options: Any) -> None:
-        self.task = self.build_task(**options)
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(
-                f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}"
-            )
-        self.render_mode = render_mode
-        self.action_space = gym.spaces.Box(-1.0, 1.0, (2,), dtype=np.float32)
-        self.observation_space = observation_space()
-        self._low, self._high = self.observation_space.low, self.observation_space.high
-        self._history: list[list[float]] = []
-        self._figure = None
-        self._t = 0
+        self._setup(render_mode, options)
 
     def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[np.ndarray, dict]:
         super().reset(seed=seed)
@@ -494,29 +486,6 @@ class EngineTrackingEnv(gym.Env):
         out = np.array(obs, dtype=np.float32)
         np.minimum(np.maximum(out, self._low, out=out), self._high, out=out)  # np.clip, without its overhead
         return out, reward, terminated, t >= self.task.horizon, {}
-
-    def render(self) -> np.ndarray | None:
-        if self.render_mode is None:
-            gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array' or 'human'")
-            return None
-        from ssme_envs.envs.rendering import render_history
-
-        image, self._figure = render_history(
-            np.array(self._history),
-            self.task.dt,
-            self._figure,
-            self.render_mode,
-            ("Pc", "MR"),
-            ("OPOV", "FPOV"),
-        )
-        return image
-
-    def close(self) -> None:
-        if self._figure is not None:
-            from ssme_envs.envs.rendering import close_figure
-
-            close_figure(self._figure)
-            self._figure = None
 
 
 __all__ = ["EngineTask", "EngineTrackingEnv", "batch_step", "initial_observation", "scalar_step"]

@@ -13,6 +13,7 @@ import gymnasium as gym
 import numpy as np
 
 from ssme_envs.envs.references import REFERENCE_KINDS, Fault, reference_signals, uniforms_needed, unit_normals
+from ssme_envs.envs.rendering import HistoryRendering
 from ssme_envs.models.nozzle import (
     DEFAULT_SUBSTEPS,
     DEFAULT_TORQUE_LIMIT,
@@ -266,7 +267,7 @@ class NozzleTask:
         return state, out, np.asarray(reward, dtype=np.float64), terminated
 
 
-class NozzleTVCEnv(gym.Env):
+class NozzleTVCEnv(HistoryRendering, gym.Env):
     """Track a nozzle deflection command with the actuator torque (thrust-vector control).
 
     The plant is the movable nozzle of the VLS launcher's first stage: ``J x'' + b x' + F = tau``
@@ -313,21 +314,14 @@ class NozzleTVCEnv(gym.Env):
     """
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 25}
+    output_names = ("nozzle angle",)
+    actuator_names = ("torque",)
+    display_scale = DEG
+    display_units = ("deg", "fraction of full scale")
     build_task: Callable[..., NozzleTask] = staticmethod(NozzleTask.build)
 
     def __init__(self, render_mode: str | None = None, **options: Any) -> None:
-        self.task = self.build_task(**options)
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(
-                f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}"
-            )
-        self.render_mode = render_mode
-        self.action_space = gym.spaces.Box(-1.0, 1.0, (1,), dtype=np.float32)
-        self.observation_space = self.task.observation_space()
-        self._low, self._high = self.observation_space.low, self.observation_space.high
-        self._history: list[list[float]] = []
-        self._figure = None
-        self._t = 0
+        self._setup(render_mode, options)
 
     def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[np.ndarray, dict]:
         super().reset(seed=seed)
@@ -366,31 +360,6 @@ class NozzleTVCEnv(gym.Env):
         out = np.array(obs, dtype=np.float32)
         np.minimum(np.maximum(out, self._low, out=out), self._high, out=out)
         return out, float(reward), bool(terminated), t >= self.task.horizon, {}
-
-    def render(self) -> np.ndarray | None:
-        if self.render_mode is None:
-            gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array' or 'human'")
-            return None
-        from ssme_envs.envs.rendering import render_history
-
-        image, self._figure = render_history(
-            np.array(self._history),
-            self.task.dt,
-            self._figure,
-            self.render_mode,
-            ("nozzle angle",),
-            ("torque",),
-            scale=DEG,
-            units=("deg", "fraction of full scale"),
-        )
-        return image
-
-    def close(self) -> None:
-        if self._figure is not None:
-            from ssme_envs.envs.rendering import close_figure
-
-            close_figure(self._figure)
-            self._figure = None
 
 
 __all__ = ["NozzleTVCEnv", "NozzleTask", "resolve_nozzle"]

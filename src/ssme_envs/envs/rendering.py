@@ -63,3 +63,53 @@ def close_figure(figure: Any) -> None:
     import matplotlib.pyplot as plt
 
     plt.close(figure)
+
+
+class HistoryRendering:
+    """Setup, ``render`` and ``close`` of a tracking env: it keeps ``self._history`` rows (outputs,
+    references, actuators) and its figure in ``self._figure``; the env class names what it draws."""
+
+    output_names: tuple[str, ...] = ()
+    actuator_names: tuple[str, ...] = ()
+    display_scale: float = 100.0
+    display_units: tuple[str, str] = ("%", "normalized")
+
+    def _setup(self, render_mode: str | None, options: dict[str, Any]) -> None:
+        """Build the task from the options, check the render mode, make the spaces."""
+        import gymnasium as gym
+
+        self.task = self.build_task(**options)
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(
+                f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}"
+            )
+        self.render_mode = render_mode
+        self.action_space = gym.spaces.Box(-1.0, 1.0, (self.task.n_actions,), dtype=np.float32)
+        self.observation_space = self.task.observation_space()
+        self._low, self._high = self.observation_space.low, self.observation_space.high
+        self._history: list[list[float]] = []
+        self._figure = None
+        self._t = 0
+
+    def render(self) -> np.ndarray | None:
+        if self.render_mode is None:
+            import gymnasium as gym
+
+            gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array' or 'human'")
+            return None
+        image, self._figure = render_history(
+            np.array(self._history),
+            self.task.dt,
+            self._figure,
+            self.render_mode,
+            self.output_names,
+            self.actuator_names,
+            self.display_scale,
+            self.display_units,
+        )
+        return image
+
+    def close(self) -> None:
+        if self._figure is not None:
+            close_figure(self._figure)
+            self._figure = None
