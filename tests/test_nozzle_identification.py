@@ -18,7 +18,7 @@ from ssme_envs.identification.nozzle_pipeline import (
     validation_experiment,
     write_nozzle_record,
 )
-from ssme_envs.models.nozzle import NozzleModel, published_nozzle, simulate_nozzle
+from ssme_envs.models.nozzle import NozzleModel, identified_nozzle, published_nozzle, simulate_nozzle
 from ssme_envs.signals import prbs
 
 
@@ -153,6 +153,26 @@ def test_cli_bad_input_exits_2_with_one_line(tmp_path, capsys, content, extra, m
     assert message in err, err
 
 
+def test_bad_validation_record_is_refused_before_the_fit(tmp_path, capsys):
+    rows = "".join(f"{0.008 * i},{1000.0 * (-1) ** (i // 3)},{1e-4 * np.sin(i / 10)}\n" for i in range(400))
+    data, check = tmp_path / "data.csv", tmp_path / "check.csv"
+    data.write_text("t,tau,beta\n" + rows)
+    check.write_text("t,tau,beta\n" + rows.replace(",1000.0,", ",nan,", 1))
+    code = main(
+        ["identify", "nozzle", "--data", str(data), "--validate", str(check), "--out", str(tmp_path / "o")]
+    )
+    err = capsys.readouterr().err
+    assert code == 2 and err.startswith(f"error: {check}: ") and "NaN" in err
+
+
+def test_validation_needs_the_model_sample_time():
+    model = identified_nozzle()
+    tau = 3000.0 * (-1.0) ** (np.arange(400) // 5)
+    record = NozzleRecord(tau, 1e-5 * np.arange(tau.size), 0.01, "tau", "beta")
+    with pytest.raises(ValueError, match=r"sample time 0\.01 s differs from the model's 0\.008 s"):
+        validate_nozzle(model, record)
+
+
 def test_cli_default_bench_reproduces_the_packaged_model(tmp_path, capsys):
     out = tmp_path / "nozzle"
     assert main(["identify", "nozzle", "--out", str(out)]) == 0
@@ -164,6 +184,8 @@ def test_cli_default_bench_reproduces_the_packaged_model(tmp_path, capsys):
     packaged = json.loads(
         (resources.files("ssme_envs") / "models" / "data" / "nozzle_identified.json").read_text()
     )
+    # a regression pin: the packaged model must be what this default run produces (it was made by
+    # it); the independent checks against the paper's Table 1 follow
     for key, value in packaged["bouc_wen"].items():
         assert made["bouc_wen"][key] == pytest.approx(value, rel=1e-6), key
     np.testing.assert_allclose(made["linear"]["A"], packaged["linear"]["A"], rtol=1e-9)

@@ -129,6 +129,17 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _needs_data(args: argparse.Namespace, flags: tuple[str, ...], embedded: str) -> None:
+    for flag in flags:
+        if getattr(args, flag) is not None:
+            raise _UsageError(f"--{flag} needs --data (the embedded {embedded} sets its own)")
+
+
+def _check_same_dt(path: Path, dt: float, reference: float, what: str) -> None:
+    if abs(dt - reference) > 1e-9 * reference:
+        raise ValueError(f"{path}: sample time {dt:g} s differs from the {what}'s {reference:g} s")
+
+
 def _identify_engine(args: argparse.Namespace) -> int:
     from ssme_envs.identification import pipeline, report
     from ssme_envs.identification.metrics import validate
@@ -146,9 +157,7 @@ def _identify_engine(args: argparse.Namespace) -> int:
         options["indices"] = _indices(args.indices)
 
     if args.data is None:
-        for flag in ("validate", "dt", "indices"):
-            if getattr(args, flag) is not None:
-                raise _UsageError(f"--{flag} needs --data (the embedded experiment sets its own)")
+        _needs_data(args, ("validate", "dt", "indices"), "experiment")
         seed = pipeline.DEFAULT_SEED if args.seed is None else args.seed
         config = TruthConfig()
         start = time.perf_counter()
@@ -183,10 +192,7 @@ def _identify_engine(args: argparse.Namespace) -> int:
     validation = {"identification": ident.model.fit["identification_record"]}
     if args.validate is not None:
         check = pipeline.read_record(args.validate, inputs, outputs, args.dt)
-        if abs(check.dt - record.dt) > 1e-9 * record.dt:
-            raise ValueError(
-                f"{args.validate}: sample time {check.dt:g} s differs from the data's {record.dt:g} s"
-            )
+        _check_same_dt(args.validate, check.dt, record.dt, "data")
         records["validation"] = check
         validation["validation"] = validate(ident.model, check.u, check.y)
         ident.model.fit["validation_record"] = validation["validation"]
@@ -205,7 +211,7 @@ def _identify_engine(args: argparse.Namespace) -> int:
 def _identify_nozzle(args: argparse.Namespace) -> int:
     from ssme_envs.identification import nozzle_pipeline as npipe
     from ssme_envs.identification.nozzle_report import write_nozzle_report
-    from ssme_envs.models.nozzle import published_nozzle
+    from ssme_envs.models.nozzle import BENCH_RATE_HZ, NOZZLE_DT, published_nozzle
 
     if args.workers < 1:
         raise _UsageError(f"--workers must be at least 1, got {args.workers}")
@@ -215,24 +221,25 @@ def _identify_nozzle(args: argparse.Namespace) -> int:
     truth = None
     start = time.perf_counter()
     if args.data is None:
-        for flag in ("validate", "dt"):
-            if getattr(args, flag) is not None:
-                raise _UsageError(f"--{flag} needs --data (the embedded bench test sets its own)")
+        _needs_data(args, ("validate", "dt"), "bench test")
         truth = published_nozzle("bouc_wen")
-        print("simulating the bench test (2.5 kHz, 59.8 s, decimated to 0.008 s) and identifying ...")
+        bench = (
+            f"{BENCH_RATE_HZ / 1000:g} kHz acquisition with sensor noise (std {npipe.SENSOR_NOISE:g} rad), "
+            f"decimated to {NOZZLE_DT:g} s "
+            f"(N = {npipe.BENCH_SAMPLES}, {npipe.BENCH_SAMPLES * NOZZLE_DT:.1f} s)"
+        )
+        print(f"simulating the bench test ({bench}) and identifying ...")
         _make_dir(args.out)
         ident, records = npipe.run_default(seed, args.workers, args.normalization_a)
         note = (
             "Bench data simulated from the paper's Table 1 Bouc-Wen nozzle (the truth of this report): "
-            "a PRBS torque keeping the angle within +-3 deg, 2.5 kHz acquisition with sensor noise (std "
-            f"{npipe.SENSOR_NOISE:g} rad), decimated to 0.008 s (N = 7476). Seed {seed}."
+            f"a PRBS torque keeping the angle within +-{npipe.RANGE_DEG:g} deg, {bench}. Seed {seed}."
         )
     else:
         records = {"identification": npipe.read_nozzle_record(args.data, args.input, args.output, args.dt)}
         if args.validate is not None:
             check = npipe.read_nozzle_record(args.validate, args.input, args.output, args.dt)
-            if abs(check.dt - records["identification"].dt) > 1e-9 * check.dt:
-                raise ValueError(f"{args.validate}: sample time {check.dt:g} s differs from the data's")
+            _check_same_dt(args.validate, check.dt, records["identification"].dt, "data")
             records["validation"] = check
         note = f"Data: {args.data}."
         _make_dir(args.out)
@@ -287,8 +294,7 @@ def _validate_engine(args: argparse.Namespace) -> int:
     records, validation = {}, {}
     for path in args.data:
         record = pipeline.read_record(path, model.input_names, model.output_names, args.dt)
-        if abs(record.dt - model.dt) > 1e-9 * model.dt:
-            raise ValueError(f"{path}: sample time {record.dt:g} s differs from the model's {model.dt:g} s")
+        _check_same_dt(path, record.dt, model.dt, "model")
         records[path.stem] = record
         validation[path.stem] = validate(model, record.u, record.y)
         see = [round(v, 5) for v in validation[path.stem]["model"]["see"]]

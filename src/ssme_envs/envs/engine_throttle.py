@@ -66,17 +66,22 @@ class ThrottleTask(EngineTask):
     state_offsets: np.ndarray = field(default=None)  # (T + 1, n), (I - A) C^T c(P)
     x_start: np.ndarray = field(default=None)  # (n,), the equilibrium at P(0) on the schedule
     tables: tuple = field(default=None, repr=False)  # the tables as float lists, for the scalar step
-    # K, B, lambda - 1, u_eq and the state offsets of each step stacked as rows, time last, so
-    # that one gather fetches every parameter of every env's step
+    # K, B, lambda - 1 and the state offsets of each step stacked as rows, time last, so that
+    # one gather fetches every parameter of every env's step; (rows, shape) of each table in it
     schedule: np.ndarray = field(init=False, repr=False)
-    schedule_shapes: tuple = field(init=False, repr=False)
+    schedule_parts: tuple = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        tables = (self.k_table, self.b_table, self.lam_table, self.offset_table, self.state_offsets)
+        tables = (self.k_table, self.b_table, self.lam_table, self.state_offsets)
         rows = [time_last(table).reshape(-1, table.shape[0]) for table in tables]
+        ends = np.cumsum([len(block) for block in rows])
+        parts = tuple(
+            (slice(end - len(block), end), table.shape[1:])
+            for end, block, table in zip(ends, rows, tables, strict=True)
+        )
         object.__setattr__(self, "schedule", np.concatenate(rows))
-        object.__setattr__(self, "schedule_shapes", tuple(table.shape[1:] for table in tables))
+        object.__setattr__(self, "schedule_parts", parts)
 
     @classmethod
     def build_throttle(
@@ -101,9 +106,7 @@ class ThrottleTask(EngineTask):
         k, b, lam = linked.parameters(power)
         lam_minus_one = lam - 1.0 if config.asymmetric_gains else np.zeros_like(lam)
         u_nom, y_nom = linked.nominal_valves(power), linked.nominal_outputs(power)
-        structure = linked.template.structure
-        c = structure.output_matrix()
-        a = structure.shift_matrix() + k @ c
+        a, _, c = linked.state_matrices(power)
         eye = np.eye(a.shape[-1])
         gain = c @ np.linalg.solve(eye - a, b)
         offset_out = y_nom - (gain @ u_nom[..., None])[..., 0]
@@ -155,12 +158,11 @@ class ThrottleTask(EngineTask):
         u0 = np.repeat(self.nominal_valves[0][:, None], n, axis=1)
         return [np.repeat(self.x_start[:, None], n, axis=1), u0, u0.copy()]
 
-    def plant_floats(self, plant: list, cmd: list, t: int) -> tuple[list, float, float]:
+    def plant_floats(self, plant: list, cmd: list, t: int, nominal: list) -> tuple[list, float, float]:
         x, linkage, valve = plant
         k_rows, b_rows, lam, offset = (table[t - 1] for table in self.tables)
-        u_nom = self.command_offsets[t - 1]
         linkage, valve = valves_floats(linkage, valve, cmd, self.params.half_backlash, self.params.stiction)
-        u_star = [v + g * abs(v - un) for v, g, un in zip(valve, lam, u_nom)]
+        u_star = [v + g * abs(v - un) for v, g, un in zip(valve, lam, nominal)]
         x = [
             xi + oi
             for xi, oi in zip(dynamics_floats(x, u_star, self.params.shift_source, k_rows, b_rows), offset)
@@ -168,17 +170,15 @@ class ThrottleTask(EngineTask):
         return [x, linkage, valve], x[-2], x[-1]
 
     def plant_arrays(
-        self, plant: list, cmd: np.ndarray, t: np.ndarray, synced: bool
+        self, plant: list, cmd: np.ndarray, t: np.ndarray, synced: bool, nominal: np.ndarray
     ) -> tuple[list, np.ndarray]:
         x, linkage, valve = plant
-        rows, start, parts = table_rows(self.schedule, t, synced), 0, []
-        for shape in self.schedule_shapes:
-            size = int(np.prod(shape))
-            parts.append(rows[start : start + size].reshape(*shape, rows.shape[-1]))
-            start += size
-        k, b, lam, u_nom, offset = parts
+        rows = table_rows(self.schedule, t, synced)
+        k, b, lam, offset = (
+            rows[part].reshape(*shape, rows.shape[-1]) for part, shape in self.schedule_parts
+        )
         linkage, valve = valves_arrays(linkage, valve, cmd, self.params.half_backlash, self.params.stiction)
-        u_star = valve + lam * np.abs(valve - u_nom)
+        u_star = valve + lam * np.abs(valve - nominal)
         x = dynamics_arrays(x, u_star, self.params.shift_source, k, b) + offset
         return [x, linkage, valve], x[x.shape[0] - 2 :]
 

@@ -93,6 +93,8 @@ class EngineTask:
     command_offsets: list | None = field(init=False, repr=False)  # offset_table as floats
     offset_schedule: np.ndarray | None = field(init=False, repr=False)  # offset_table, (m, T + 1)
     fault_step: int = field(init=False)  # the step after which the fault acts (-1: none)
+    # largest reward loss of one step inside the envelope (errors and valve rates at their bounds)
+    step_cost_bound: float = field(init=False)
 
     @classmethod
     def build(
@@ -164,6 +166,13 @@ class EngineTask:
             raise ValueError(
                 f"fault time {self.fault.time:g} s is beyond the episode ({self.horizon * self.dt:g} s)"
             )
+        bias = (
+            abs(self.fault.magnitude) if self.fault is not None and self.fault.kind == "sensor_bias" else 0.0
+        )
+        error = 100.0 * (self.envelope + float(self.amplitude.max()) + bias) + 50.0
+        object.__setattr__(
+            self, "step_cost_bound", self.error_weight * 2 * error**2 + self.rate_weight * 2 * 2.0**2
+        )
 
     n_actions = 2  # OPOV, FPOV
     n_channels = 2  # Pc, MR
@@ -198,12 +207,13 @@ class EngineTask:
     def initial_plant_arrays(self, n: int) -> list:
         return [np.zeros((self.n_states, n)), np.zeros((2, n)), np.zeros((2, n))]
 
-    def plant_floats(self, plant: list, cmd: list, t: int) -> tuple[list, float, float]:
+    # ``nominal``: the command offsets of this step (the throttle's valve schedule) or None
+    def plant_floats(self, plant: list, cmd: list, t: int, nominal: list | None) -> tuple[list, float, float]:
         x, linkage, valve = step_floats(*plant, cmd, self.params, self.rows)
         return [x, linkage, valve], x[-2], x[-1]
 
     def plant_arrays(
-        self, plant: list, cmd: np.ndarray, t: np.ndarray, synced: bool
+        self, plant: list, cmd: np.ndarray, t: np.ndarray, synced: bool, nominal: np.ndarray | None
     ) -> tuple[list, np.ndarray]:
         x, linkage, valve = step_arrays(*plant, cmd, self.params)
         return [x, linkage, valve], x[x.shape[0] - 2 :]
@@ -211,15 +221,6 @@ class EngineTask:
     @staticmethod
     def valve_positions(plant: list) -> list:
         return plant[-1]
-
-    @property
-    def step_cost_bound(self) -> float:
-        """Largest reward loss of one step inside the envelope (errors and valve rates at their bounds)."""
-        bias = (
-            abs(self.fault.magnitude) if self.fault is not None and self.fault.kind == "sensor_bias" else 0.0
-        )
-        error = 100.0 * (self.envelope + float(self.amplitude.max()) + bias) + 50.0
-        return self.error_weight * 2 * error**2 + self.rate_weight * 2 * 2.0**2
 
     @property
     def draw_size(self) -> int:
@@ -259,6 +260,7 @@ def scalar_step(task: EngineTask, state: list, a0: float, a1: float, t: int, ref
     (noise as unit draws). Returns (state, observation list, reward, terminated)."""
     plant, integral, prev, held = state
     cmd = [a0 * task.action_scale, a1 * task.action_scale]
+    nominal = None
     if task.command_offsets is not None:  # the throttle's nominal valve schedule
         nominal = task.command_offsets[t - 1]
         cmd = [nominal[0] + cmd[0], nominal[1] + cmd[1]]
@@ -271,7 +273,7 @@ def scalar_step(task: EngineTask, state: list, a0: float, a1: float, t: int, ref
             cmd[i] = held
         elif fault.kind == "gain_loss":
             cmd[i] = cmd[i] * fault.magnitude
-    plant, y0, y1 = task.plant_floats(plant, cmd, t)
+    plant, y0, y1 = task.plant_floats(plant, cmd, t, nominal)
     s0, s1 = task.noise_scale
     m0, m1 = y0 + noise[0] * s0, y1 + noise[1] * s1
     if fault is not None and fault.kind == "sensor_bias" and t >= task.fault_step:
@@ -322,8 +324,10 @@ def batch_step(
     (state, observations (N, 10) float32 clipped to [low, high], rewards (N,), terminated (N,))."""
     plant, previous_integral, prev, held = state
     cmd = acts * task.action_scale
+    nominal = None
     if task.offset_schedule is not None:
-        cmd += table_rows(task.offset_schedule, t, synced)
+        nominal = table_rows(task.offset_schedule, t, synced)
+        cmd += nominal
     fault = task.fault
     if fault is not None:
         i, active = fault.index, t > task.fault_step
@@ -332,7 +336,7 @@ def batch_step(
             cmd[i] = np.where(active, held, cmd[i])
         elif fault.kind == "gain_loss":
             cmd[i] = np.where(active, cmd[i] * fault.magnitude, cmd[i])
-    plant, y = task.plant_arrays(plant, cmd, t, synced)
+    plant, y = task.plant_arrays(plant, cmd, t, synced, nominal)
     n = acts.shape[1]
     obs = np.empty((10, n))  # rows as in the observation table, filled in place
     m = obs[0:2]
@@ -366,12 +370,9 @@ def batch_step(
 
 
 def initial_observation(task: EngineTask, ref: np.ndarray, draws: np.ndarray) -> np.ndarray:
-    """Observations at reset, float32: ``ref`` and the unit noise ``draws`` have the channel first,
-    (2,) for one env or (2, N) for N envs; the result is (10,) or (10, N)."""
-    ref = np.asarray(ref, dtype=float)
-    column = np.ndim(draws) == 1
-    y = task.initial_outputs if column else task.initial_outputs[:, None]
-    m = y + np.asarray(draws) * (task.noise_std if column else task.noise_std[:, None])
+    """Observations at reset (10, N) float32 from the references and unit noise draws of step 0,
+    (2, N) each."""
+    m = task.initial_outputs[:, None] + draws * task.noise_std[:, None]
     fault = task.fault
     if fault is not None and fault.kind == "sensor_bias" and task.fault_step == 0:
         m[fault.index] = m[fault.index] + fault.magnitude
@@ -452,14 +453,14 @@ class EngineTrackingEnv(HistoryRendering, gym.Env):
         super().reset(seed=seed)
         uniforms = self.np_random.random(self.task.draw_size, dtype=np.float32)
         refs, noise = self.task.episodes(uniforms[:, None])
-        refs, noise = refs[:, :, 0].T, noise[:, :, 0].T
-        self._refs, self._noise = refs.tolist(), noise.astype(np.float64).tolist()
+        obs = np.clip(initial_observation(self.task, refs[:, 0], noise[:, 0])[:, 0], self._low, self._high)
+        self._refs = refs[:, :, 0].T.tolist()
+        self._noise = noise[:, :, 0].T.astype(np.float64).tolist()
         self._state = [self.task.initial_plant_floats(), [0.0, 0.0], [0.0, 0.0], 0.0]
         self._t = 0
-        obs = np.clip(initial_observation(self.task, refs[0], noise[0]), self._low, self._high)
         if self.render_mode:
             valve = self.task.valve_positions(self._state[0])
-            self._history = [[obs[0] / 100.0, obs[1] / 100.0, *refs[0], valve[0], valve[1]]]
+            self._history = [[obs[0] / 100.0, obs[1] / 100.0, *self._refs[0], valve[0], valve[1]]]
         return obs, {}
 
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict]:

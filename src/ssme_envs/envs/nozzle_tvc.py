@@ -89,6 +89,8 @@ class NozzleTask:
     float_params: tuple = field(init=False, repr=False)
     array_params: tuple = field(init=False, repr=False)
     fault_step: int = field(init=False)
+    # largest reward loss of one step inside the envelope (with 1 deg for noise)
+    step_cost_bound: float = field(init=False)
 
     n_actions = 1
     n_channels = 1
@@ -149,18 +151,14 @@ class NozzleTask:
             raise ValueError(
                 f"fault time {self.fault.time:g} s is beyond the episode ({self.horizon * self.dt:g} s)"
             )
+        bias = abs(self.fault.magnitude) if self.fault is not None and self.fault.kind == "sensor_bias" else 0
+        error = DEG * (self.envelope + float(self.amplitude[0]) + bias) + 1.0
+        object.__setattr__(self, "step_cost_bound", self.error_weight * error**2 + self.rate_weight * 2.0**2)
 
     @staticmethod
     def observation_space() -> gym.spaces.Box:
         high = np.array([20, 2000, 10, 30, 10, 1], dtype=np.float32)
         return gym.spaces.Box(-high, high, dtype=np.float32)
-
-    @property
-    def step_cost_bound(self) -> float:
-        """Largest reward loss of one step inside the envelope (with 1 deg for noise)."""
-        bias = abs(self.fault.magnitude) if self.fault is not None and self.fault.kind == "sensor_bias" else 0
-        error = DEG * (self.envelope + float(self.amplitude[0]) + bias) + 1.0
-        return self.error_weight * error**2 + self.rate_weight * 2.0**2
 
     @property
     def shared_references(self) -> None:
@@ -260,11 +258,10 @@ class NozzleTask:
         state, obs, reward, terminated = self.step(
             state, acts[0], t, ref[0], noise[0].astype(np.float64), ARRAY_OPS
         )
-        n = acts.shape[1]
-        out = np.stack([np.broadcast_to(row, (n,)) for row in obs], axis=1).astype(np.float32)
+        out = np.stack(obs, axis=1).astype(np.float32)
         np.maximum(out, low, out=out)
         np.minimum(out, high, out=out)
-        return state, out, np.asarray(reward, dtype=np.float64), terminated
+        return state, out, reward, terminated
 
 
 class NozzleTVCEnv(HistoryRendering, gym.Env):

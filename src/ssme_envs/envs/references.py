@@ -73,8 +73,8 @@ def reference_signals(
         level = (0.5 + 0.5 * uniforms) * amplitude[:, None]
         return wave[None, :, None] * level[:, None, :]
     if kind == "attitude":
-        steps_ = reference_signals("random_steps", uniforms, length, amplitude, dt)
-        return signal.lfilter(*_attitude_filter(dt), steps_, axis=1)
+        held = reference_signals("random_steps", uniforms, length, amplitude, dt)
+        return signal.lfilter(*_attitude_filter(dt), held, axis=1)
     if kind == "random_steps":
         count = _hold_count(length, dt)
         shortest, longest = round(1.0 / dt), round(3.0 / dt)

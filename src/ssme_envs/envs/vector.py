@@ -71,13 +71,13 @@ class TrackingVectorEnv(VectorEnv):
         self._rngs: list[np.random.Generator] = [seeding.np_random(None)[0] for _ in range(n)]
         # Episode data with the env axis last: one step's values of every env are contiguous.
         # References common to every episode (the throttle profile) are not stored per env.
-        self._shared_refs = self.task.shared_references
-        if self._shared_refs is not None:
-            self._shared_refs_by_step = np.ascontiguousarray(self._shared_refs.T)  # (channels, T + 1)
-        self._refs = None if self._shared_refs is not None else np.zeros((channels, length, n))
+        shared = self.task.shared_references
+        self._shared_refs = None if shared is None else np.ascontiguousarray(shared.T)  # (channels, T + 1)
+        self._refs = None if shared is not None else np.zeros((channels, length, n))
         self._noise = np.zeros((channels, length, n), dtype=np.float32)  # unit draws, scaled at each step
-        self._draws: np.ndarray | None = None  # (N, draw_size) and transposed, made at first reset
-        self._uniforms: np.ndarray | None = None
+        # Buffers reused from episode to episode: fresh tens of MB would cost page faults.
+        self._draws = np.empty((n, self.task.draw_size), dtype=np.float32)
+        self._uniforms = np.empty((self.task.draw_size, n), dtype=np.float32)
         self._t = np.zeros(n, dtype=np.int64)
         self._synced = True  # every env at the same step: reads are slices, not gathers
         self._rows = np.arange(n)
@@ -87,18 +87,14 @@ class TrackingVectorEnv(VectorEnv):
     def _restart(self, envs: np.ndarray) -> np.ndarray:
         """Zero the state of the given envs and draw their next episodes; their first observations."""
         task, k = self.task, len(envs)
-        if k == self.num_envs:
+        every = k == self.num_envs
+        if every:
             self._state = task.zero_state(k)
         else:
             _set_columns(self._state, task.zero_state(k), envs)
-        # Buffers reused from episode to episode: fresh tens of MB would cost page faults.
-        if self._draws is None:
-            self._draws = np.empty((self.num_envs, task.draw_size), dtype=np.float32)
-            self._uniforms = np.empty((task.draw_size, self.num_envs), dtype=np.float32)
         draws = self._draws[:k]
         for row, i in enumerate(envs):
             self._rngs[i].random(out=draws[row], dtype=np.float32)
-        every = k == self.num_envs
         uniforms = _transpose(draws, self._uniforms if every else None)
         refs, noise = task.episodes(uniforms, self._noise if every else None)
         if every:
@@ -120,7 +116,7 @@ class TrackingVectorEnv(VectorEnv):
         if len(seed) != self.num_envs:
             raise ValueError(f"seed must be an int or {self.num_envs} seeds, got {len(seed)}")
         for i, s in enumerate(seed):
-            if s is not None or self._rngs[i] is None:
+            if s is not None:
                 self._rngs[i] = seeding.np_random(s)[0]
         self._autoreset[:] = False
         return self._restart(self._rows), {}
@@ -145,12 +141,12 @@ class TrackingVectorEnv(VectorEnv):
         np.minimum(t, task.horizon, out=t)  # an env past its end is restarted below
         if self._synced:  # contiguous slices
             noise = self._noise[:, t[0]]
-            refs = self._refs[:, t[0]] if self._refs is not None else self._shared_refs[t[0], :, None]
+            refs = self._refs[:, t[0]] if self._refs is not None else self._shared_refs[:, t[0], None]
         else:  # one flat index for both tables: take is much faster than fancy indexing
             flat = t * self.num_envs + self._rows
             noise = np.take(self._noise.reshape(len(self._noise), -1), flat, axis=1)
             if self._refs is None:
-                refs = np.take(self._shared_refs_by_step, t, axis=1)
+                refs = np.take(self._shared_refs, t, axis=1)
             else:
                 refs = np.take(self._refs.reshape(len(self._refs), -1), flat, axis=1)
         self._state, obs, reward, terminated = task.batch_step(

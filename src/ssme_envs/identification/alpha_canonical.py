@@ -44,7 +44,7 @@ import numpy as np
 import scipy.linalg
 
 from ssme_envs.models.engine import TruthConfig, simulate
-from ssme_envs.models.statespace import AlphaCanonicalModel, AlphaStructure
+from ssme_envs.models.statespace import AlphaCanonicalModel, AlphaStructure, check_dt
 
 DEFAULT_MAX_INDEX = 6
 DEFAULT_RANK_TOL = 0.1
@@ -175,6 +175,7 @@ def estimate_indices(
     rank_tol: float = DEFAULT_RANK_TOL,
     asymmetric: bool = True,
     output_names: Sequence[str] | None = None,
+    input_names: Sequence[str] | None = None,
 ) -> StructureSearch:
     """Observability indices by the row-by-row rank search on Q_o (eqs 28-33).
 
@@ -188,6 +189,8 @@ def estimate_indices(
         Relative norm below which a candidate row counts as dependent.
     asymmetric : bool
         Allow for the piecewise-linear input gain of eq 36.
+    output_names, input_names : sequences of str, optional
+        Used in error messages.
     """
     if max_index < 1:
         raise ValueError(f"max_index must be >= 1, got {max_index}")
@@ -196,8 +199,9 @@ def estimate_indices(
     horizon, p = y.shape
     names = _names(output_names, p, "y")
     window = max_index
-    gamma = _binary_amplitudes(u) if asymmetric else np.full(u.shape[1], np.nan)
-    n_feat = u.shape[1] + int(np.isnan(gamma).sum() if asymmetric else 0)
+    gamma = _binary_amplitudes(u, input_names) if asymmetric else np.full(u.shape[1], np.nan)
+    feats = _input_features(u, gamma, asymmetric)
+    n_feat = feats.shape[1]
     start = 2 * window
     needed = (window * n_feat + 1) + window * n_feat + window * p
     if horizon - start < 2 * needed:
@@ -205,7 +209,6 @@ def estimate_indices(
             f"the record has {horizon} samples; a structure search up to index {max_index} needs at "
             f"least {start + 2 * needed} (use a longer record or a smaller max_index)"
         )
-    feats = _input_features(u, gamma, asymmetric)
     lags = range(1, window + 1)
     r_block = np.hstack([_lags(feats, lags, start), np.ones((horizon - start, 1))])
     z_block = _lags(feats, range(window + 1, 2 * window + 1), start)
@@ -263,12 +266,15 @@ def _regressors(
     return np.column_stack([*y_cols, u_cols, np.ones(y.shape[0] - start)])
 
 
-def _simulation_error(model: AlphaCanonicalModel, u: np.ndarray, y: np.ndarray) -> float:
-    """Sum of squared simulation errors (eqs 51-52); inf for an unstable or non-finite model."""
-    if not np.all(np.isfinite(model.A)) or model.spectral_radius() >= 1.0:
-        return float("inf")
-    err = y - simulate(model, u, TruthConfig.ideal())[1]
-    return float(np.sum(err**2))
+def _simulation_error(
+    model: AlphaCanonicalModel, u: np.ndarray, y: np.ndarray
+) -> tuple[float, np.ndarray | None]:
+    """Sum of squared simulation errors (eqs 51-52) and the simulated outputs; (inf, None) for
+    an unstable model."""
+    if model.spectral_radius() >= 1.0:
+        return float("inf"), None
+    simulated = simulate(model, u, TruthConfig.ideal())[1]
+    return float(np.sum((y - simulated) ** 2)), simulated
 
 
 def identify(
@@ -307,8 +313,7 @@ def identify(
     """
     if method not in ("iv", "ls"):
         raise ValueError(f"method must be 'iv' or 'ls', got {method!r}")
-    if not (isinstance(dt, int | float) and np.isfinite(dt) and dt > 0):
-        raise ValueError(f"dt must be a positive number of seconds, got {dt!r}")
+    dt = check_dt(dt)
     in_names = _names(input_names, np.shape(u)[-1] if np.ndim(u) == 2 else 1, "u")
     out_names = _names(output_names, np.shape(y)[-1] if np.ndim(y) == 2 else 1, "y")
     u, y = check_record(u, y, in_names, out_names)
@@ -316,7 +321,7 @@ def identify(
 
     search = None
     if indices is None:
-        search = estimate_indices(u, y, max_index, rank_tol, asymmetric, out_names)
+        search = estimate_indices(u, y, max_index, rank_tol, asymmetric, out_names, in_names)
         indices = search.indices
     structure = AlphaStructure.from_indices(indices)
     if structure.n_outputs != p:
@@ -364,9 +369,10 @@ def identify(
         # Each pass takes the previous model's simulated output as instruments; a pass is kept
         # only if its model is stable and simulates the record at least as well (weak
         # instruments can otherwise throw the estimate away from the least-squares one).
-        best = _simulation_error(model, u, y)
+        best, simulated = _simulation_error(model, u, y)
         for _ in range(2):
-            simulated = simulate(model, u, TruthConfig.ideal())[1]
+            if simulated is None:  # an unstable start still gives instruments
+                simulated = simulate(model, u, TruthConfig.ideal())[1]
             thetas = []
             for i, phi in enumerate(phis):
                 instruments = _regressors(structure, i, simulated, feats, start)
@@ -375,10 +381,10 @@ def identify(
                 )
             candidate_parts = _realize(structure, thetas, m, gamma, asymmetric, out_names)
             candidate = build(candidate_parts)
-            error = _simulation_error(candidate, u, y)
+            error, candidate_simulated = _simulation_error(candidate, u, y)
             if not error <= best:
                 break
-            parts, model, best = candidate_parts, candidate, error
+            parts, model, best, simulated = candidate_parts, candidate, error, candidate_simulated
     intercept = parts[4]
     return Identification(model, search, intercept, method)
 

@@ -41,6 +41,7 @@ import scipy.stats
 from ssme_envs.identification.alpha_canonical import check_record
 from ssme_envs.identification.metrics import fit_percent
 from ssme_envs.models.nozzle import NozzleParameters, recommended_substeps, simulate_nozzle
+from ssme_envs.models.statespace import check_dt
 
 NORMALIZED_NAMES = ("J", "b", "k_el", "k_hys", "beta_n", "gamma_n", "n")
 DEFAULT_NORMALIZATION_A = 0.35
@@ -168,8 +169,9 @@ class _EquationError:
         fw = _svf(self.hysteresis_path(beta_n, gamma_n, power), self.dt, self.wf, 0)[:, self.keep]
         resid_w = fw - (fw @ self.q) @ self.q.T
         denom = np.einsum("ij,ij->i", resid_w, resid_w)
-        k_hys = (resid_w @ self.target) / np.where(denom > 0, denom, 1.0)
-        cost = (self.linear_cost - k_hys * (resid_w @ self.target)) / self.linear_cost
+        projection = resid_w @ self.target
+        k_hys = projection / np.where(denom > 0, denom, 1.0)
+        cost = (self.linear_cost - k_hys * projection) / self.linear_cost
         return np.where((k_hys > 0) & (denom > 0), cost, 1.0), k_hys
 
     def linear_part(self, fw: np.ndarray | None, k_hys: float) -> np.ndarray:
@@ -221,14 +223,18 @@ class _Residuals:
             self._last = (theta.tobytes(), self.simulate(theta, self.substeps) - self.measured)
         return self._last[1]
 
-    def jacobian(self, theta: np.ndarray) -> np.ndarray:
+    def jacobian(self, theta: np.ndarray, columns: int | None = None) -> np.ndarray:
+        """Forward differences in the first ``columns`` parameters (all by default)."""
         base = self(theta)
         steps = 1e-7 * np.maximum(np.abs(theta), 1e-3)
-        jobs = [(theta + np.eye(theta.size)[i] * steps[i], self.substeps) for i in range(theta.size)]
+        count = theta.size if columns is None else columns
+        jobs = [(theta + np.eye(theta.size)[i] * steps[i], self.substeps) for i in range(count)]
         runs = (
             self.pool.map(_run_worker, jobs) if self.pool is not None else (self.simulate(*j) for j in jobs)
         )
-        return np.column_stack([(run - self.measured - base) / h for run, h in zip(runs, steps, strict=True)])
+        return np.column_stack(
+            [(run - self.measured - base) / h for run, h in zip(runs, steps[:count], strict=True)]
+        )
 
 
 def _make_pool(workers: int, simulator: _Simulator):
@@ -275,8 +281,7 @@ def fit_bouc_wen(
     """
     start = time.perf_counter()
     tau, x = check_torque_record(tau, x)
-    if not (np.isfinite(dt) and dt > 0):
-        raise ValueError(f"dt must be a positive number of seconds, got {dt!r}")
+    dt = check_dt(dt)
     if not normalization_A > 0:
         raise ValueError(f"normalization_A must be positive, got {normalization_A!r}")
     amplitude = float(np.max(np.abs(x - x[0])))
@@ -353,7 +358,7 @@ def fit_bouc_wen(
         lin = scipy.optimize.least_squares(
             lambda th: lin_resid(linear_theta(th)),
             np.array([j0, max(b0, 0.0), k0]),
-            jac=lambda th: lin_resid.jacobian(linear_theta(th))[:, :3],
+            jac=lambda th: lin_resid.jacobian(linear_theta(th), columns=3),
             bounds=([1e-6 * j0, 0.0, 1e-6 * k0], np.inf),
             x_scale=np.abs([j0, max(abs(b0), 1e-3), k0]),
             max_nfev=40,

@@ -127,7 +127,12 @@ def validation_experiment(params: NozzleParameters, seed: int = DEFAULT_SEED + 1
 def read_nozzle_record(
     path: str | Path, input_name: str = "tau", output_name: str = "beta", dt: float | None = None
 ) -> NozzleRecord:
+    """A torque -> angle record from CSV, checked as the fit and the validation need it."""
     data, dt = read_columns(path, [input_name, output_name], dt)
+    try:
+        check_torque_record(data[:, 0], data[:, 1], names=(input_name, output_name))
+    except ValueError as exc:
+        raise ValueError(f"{path}: {exc}") from None
     return NozzleRecord(data[:, 0], data[:, 1], dt, input_name, output_name)
 
 
@@ -221,6 +226,9 @@ def simulate_linear_model(model: NozzleModel, record: NozzleRecord) -> np.ndarra
 
 def validate_nozzle(model: NozzleModel, record: NozzleRecord) -> dict[str, float]:
     """Fit % of the simulated angle: DSR_e model, and the joint (Bouc-Wen, else linear J, b, k)."""
+    check_torque_record(record.tau, record.beta, names=(record.input_name, record.output_name))
+    if abs(record.dt - model.dt) > 1e-9 * model.dt:
+        raise ValueError(f"the record's sample time {record.dt:g} s differs from the model's {model.dt:g} s")
     return {
         "dsr_e_fit_percent": float(fit_percent(record.beta, simulate_linear_model(model, record))),
         "joint_fit_percent": float(fit_percent(record.beta, simulate_joint(model.plant(), record))),

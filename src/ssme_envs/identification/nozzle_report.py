@@ -64,8 +64,7 @@ def plot_hysteresis(
     """
     plt = agg_pyplot()
     stop = min(record.tau.size, int(seconds / record.dt))
-    lin = ident.model.linear
-    joint = ident.model.bouc_wen or NozzleParameters.linear(lin["J"], lin["b"], lin["k"])
+    joint = ident.model.plant()
     window = 5
     rate = scipy.signal.savgol_filter(record.beta, window, 3, deriv=1, delta=record.dt)
     accel = scipy.signal.savgol_filter(record.beta, window, 3, deriv=2, delta=record.dt)
@@ -82,7 +81,8 @@ def plot_hysteresis(
         label="from the record",
     )
     span = np.linspace(record.beta[:stop].min(), record.beta[:stop].max(), 2)
-    ax.plot(np.degrees(span), lin["k"] * span, "--", color="tab:blue", label="linear model: k x")
+    stiffness = ident.model.linear["k"]
+    ax.plot(np.degrees(span), stiffness * span, "--", color="tab:blue", label="linear model: k x")
     if ident.model.bouc_wen is not None:
         core = NozzleCore(ident.model.bouc_wen, dt=record.dt, torque_limit=np.inf)
         angle, force = np.empty(stop), np.empty(stop)
@@ -158,8 +158,7 @@ def write_nozzle_report(
         f"simulation fit {dsr['fit_percent']:.1f} % on the identification record.",
         "",
         f"G(s) = ({num[0]:.3g} s^2 + {num[1]:.4g} s + {num[2]:.5g}) / (s^2 + {den[1]:.4g} s + {den[2]:.5g}); "
-        "the paper's eq 5: "
-        "0.03971 / (s^2 + 14.95 s + 5694).",
+        f"the paper's eq 5: {PAPER_TF[0][0]:g} / (s^2 + {PAPER_TF[1][1]:g} s + {PAPER_TF[1][2]:g}).",
         "",
         f"Natural frequency {dsr['natural_frequency_hz']:.2f} Hz, damping ratio {dsr['damping_ratio']:.4f}, "
         f"resonance {dsr['resonance_frequency_hz']:.2f} Hz (paper: 11.88 Hz resonance, damping 0.0971).",

@@ -8,6 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ssme_envs.models.statespace import check_dt
+
 
 def read_columns(
     path: str | Path, columns: Sequence[str], dt: float | None = None
@@ -73,9 +75,7 @@ def read_columns(
         dt = step
     elif dt is None:
         raise ValueError(f"{path}: no 't' column; give the sample time (--dt)")
-    if not (np.isfinite(dt) and dt > 0):
-        raise ValueError(f"dt must be a positive number of seconds, got {dt!r}")
-    return data[:, [index[c] for c in columns]], float(dt)
+    return data[:, [index[c] for c in columns]], check_dt(dt)
 
 
 def write_columns(path: str | Path, dt: float, names: Sequence[str], data: np.ndarray) -> None:

@@ -44,6 +44,7 @@ import scipy.linalg
 import scipy.signal
 
 from ssme_envs.identification.alpha_canonical import check_record
+from ssme_envs.models.statespace import check_dt
 
 DEFAULT_MAX_ORDER = 10
 # Target for the neglected term of the innovations estimate: rho(A - K C)^J below this.
@@ -93,9 +94,7 @@ class InnovationsModel:
                 raise ValueError(f"{name} has NaN or inf entries")
             mats[name].setflags(write=False)
             object.__setattr__(self, name, mats[name])
-        if not (isinstance(self.dt, int | float) and np.isfinite(self.dt) and self.dt > 0):
-            raise ValueError(f"dt must be a positive number of seconds, got {self.dt!r}")
-        object.__setattr__(self, "dt", float(self.dt))
+        object.__setattr__(self, "dt", check_dt(self.dt))
 
     @property
     def n_states(self) -> int:
@@ -194,14 +193,14 @@ def _block_hankel(x: np.ndarray, first: int, rows: int, cols: int) -> np.ndarray
     return np.vstack([x[first + i : first + i + cols].T for i in range(rows)])
 
 
-def _stack_rows(m: int, p: int, past: int, future: int, noise_free: bool) -> int:
+def _stack_rows(m: int, p: int, past: int, future: int) -> int:
     """Rows of ``[U_f; E_f; U_p; Y_p; Y_f]``."""
-    return (future + 1) * (m + p + (0 if noise_free else p)) + past * (m + p)
+    return (future + 1) * (m + 2 * p) + past * (m + p)
 
 
 def _samples_needed(m: int, p: int, past: int, future: int, per_row: int) -> int:
     """Record length giving ``per_row`` columns per row of the stacked data matrix."""
-    return past + future + per_row * _stack_rows(m, p, past, future, noise_free=False)
+    return past + future + per_row * _stack_rows(m, p, past, future)
 
 
 def _past_horizon_cap(n_samples: int, m: int, p: int, future: int) -> int:
@@ -435,8 +434,7 @@ def dsr_e(
         inputs not persistently exciting, a record too short for the horizons (with the length
         needed), or bad arguments.
     """
-    if not (isinstance(dt, int | float) and np.isfinite(dt) and dt > 0):
-        raise ValueError(f"dt must be a positive number of seconds, got {dt!r}")
+    dt = check_dt(dt)
     order = _positive_int(order, "order")
     past_horizon = _positive_int(past_horizon, "past_horizon")
     future_horizon = _positive_int(future_horizon, "future_horizon")

@@ -79,13 +79,11 @@ class LinkedEngineModel:
         """The point model at a power level (the published one at 70, 80, 90, 100 %; 110 % is outside)."""
         p = self.check_power(power)
         t = self.template
-        structure = t.structure
-        k = self._k(p)
-        a = structure.shift_matrix() + k @ structure.output_matrix()
+        a, b, c = self.state_matrices(p)
         return AlphaCanonicalModel(
             A=a,
-            B=self._b(p),
-            C=structure.output_matrix(),
+            B=b,
+            C=c,
             dt=t.dt,
             observability_indices=t.observability_indices,
             lam=self._lam(p),
@@ -98,6 +96,14 @@ class LinkedEngineModel:
         """K, B, lambda at an array of power levels: shapes (..., n, p), (..., n, m), (..., m)."""
         p = np.clip(np.asarray(power, dtype=float), *POWER_RANGE)
         return self._k(p), self._b(p), self._lam(p)
+
+    def state_matrices(self, power: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """A(P) = A_o + K(P) C and B(P) at an array of power levels, shapes (..., n, n) and
+        (..., n, m), and the constant C (p, n)."""
+        k, b, _ = self.parameters(power)
+        structure = self.template.structure
+        c = structure.output_matrix()
+        return structure.shift_matrix() + k @ c, b, c
 
     def dc_gain(self, power: float) -> np.ndarray:
         """Steady-state gain of the local model from u* to y, shape (p, m)."""
@@ -112,10 +118,7 @@ class LinkedEngineModel:
     @cached_property
     def _schedule(self) -> tuple[np.ndarray, np.ndarray]:
         grid = np.arange(POWER_RANGE[0], POWER_RANGE[1] + 0.5 * _GRID_STEP, _GRID_STEP)
-        k, b, _ = self.parameters(grid)
-        structure = self.template.structure
-        a = structure.shift_matrix() + k @ structure.output_matrix()
-        c = structure.output_matrix()
+        a, b, c = self.state_matrices(grid)
         eye = np.eye(a.shape[-1])
         gains = c @ np.linalg.solve(eye - a, b)  # (G, p, m)
         slope = np.linalg.solve(gains, np.broadcast_to([0.01, 0.0], (grid.size, 2))[..., None])[..., 0]

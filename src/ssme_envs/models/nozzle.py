@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from ssme_envs.models.statespace import as_matrix, dumps_compact, read_json
+from ssme_envs.models.statespace import as_matrix, check_dt, dumps_compact, read_json
 
 NOZZLE_DT = 0.008  # s, the paper's decimated sample time
 BENCH_RATE_HZ = 2500.0  # the bench acquisition rate
@@ -169,8 +169,7 @@ class NozzleCore:
             norm = [p.normalized() for p in params]
             params = {key: np.array([d[key] for d in norm]) for key in norm[0]}
         self.n = len(np.atleast_1d(params["J"]))
-        if not (dt > 0 and np.isfinite(dt)):
-            raise ValueError(f"dt must be a positive number of seconds, got {dt!r}")
+        dt = check_dt(dt)
         if int(substeps) != substeps or substeps < 1:
             raise ValueError(f"substeps must be a positive integer, got {substeps!r}")
         if not torque_limit > 0:

@@ -20,6 +20,7 @@ one-step equation of ``y_i(k)`` (eq 11), and the uniqueness condition (eq 8) for
 from __future__ import annotations
 
 import json
+import numbers
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -105,6 +106,13 @@ def asymmetric_gain(u: np.ndarray, lam: np.ndarray) -> np.ndarray:
     return u + (np.asarray(lam, dtype=float) - 1.0) * np.abs(u)
 
 
+def check_dt(dt: Any) -> float:
+    """A sample time as a float, or ValueError unless it is a positive finite number of seconds."""
+    if not (isinstance(dt, numbers.Real) and not isinstance(dt, bool) and np.isfinite(dt) and dt > 0):
+        raise ValueError(f"dt must be a positive number of seconds, got {dt!r}")
+    return float(dt)
+
+
 def as_matrix(value: Any, name: str, shape: tuple[int | None, int | None]) -> np.ndarray:
     try:
         arr = np.asarray(value, dtype=float)
@@ -158,9 +166,7 @@ class AlphaCanonicalModel:
         self.B = as_matrix(self.B, "B", (n, None))
         self.C = as_matrix(self.C, "C", (None, n))
         m, p = self.B.shape[1], self.C.shape[0]
-        if not (isinstance(self.dt, int | float) and np.isfinite(self.dt) and self.dt > 0):
-            raise ValueError(f"dt must be a positive number of seconds, got {self.dt!r}")
-        self.dt = float(self.dt)
+        self.dt = check_dt(self.dt)
         structure = AlphaStructure.from_indices(self.observability_indices)
         self.observability_indices = structure.indices
         if structure.n_outputs != p or structure.n_states != n:
