@@ -18,7 +18,7 @@ from ssme_envs.envs.references import (
     uniforms_needed,
     unit_normals,
 )
-from ssme_envs.envs.rendering import HistoryRendering
+from ssme_envs.envs.tracking_env import TrackingEnv
 from ssme_envs.models.engine import (
     POWER_LEVELS,
     StepParameters,
@@ -316,12 +316,10 @@ def batch_step(
     ref: np.ndarray,
     noise: np.ndarray,
     synced: bool,
-    low: np.ndarray,
-    high: np.ndarray,
 ):
     """N envs, one step, as :func:`scalar_step` on state-major arrays: acts (2, N), ref (2, N)
     or (2, 1), noise (2, N), t (N,); ``synced`` when every env is at the same step. Returns
-    (state, observations (N, 10) float32 clipped to [low, high], rewards (N,), terminated (N,))."""
+    (state, observations (N, 10) float32 before clipping, rewards (N,), terminated (N,))."""
     plant, previous_integral, prev, held = state
     cmd = acts * task.action_scale
     nominal = None
@@ -363,10 +361,7 @@ def batch_step(
     np.multiply(ref, 100.0, out=obs[2:4])
     obs[6:8] = integral
     obs[8:10] = acts
-    out = obs.T.astype(np.float32)
-    np.maximum(out, low, out=out)
-    np.minimum(out, high, out=out)
-    return [plant, integral, acts, held], out, reward, terminated
+    return [plant, integral, acts, held], obs.T.astype(np.float32), reward, terminated
 
 
 def initial_observation(task: EngineTask, ref: np.ndarray, draws: np.ndarray) -> np.ndarray:
@@ -391,7 +386,7 @@ def check_action_values(a0: float, a1: float) -> None:
         raise ValueError(f"action must be finite, got {[a0, a1]} (NaN or inf)")
 
 
-class EngineTrackingEnv(HistoryRendering, gym.Env):
+class EngineTrackingEnv(TrackingEnv):
     """Track chamber pressure (Pc) and mixture ratio (MR) with the OPOV and FPOV valves.
 
     The plant is an SSME point model (NASA TM-104422) at one power level, 0.04 s per step: by
@@ -441,23 +436,15 @@ class EngineTrackingEnv(HistoryRendering, gym.Env):
     "rgb_array".
     """
 
-    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 25}
     output_names = ("Pc", "MR")
     actuator_names = ("OPOV", "FPOV")
     build_task = staticmethod(EngineTask.build)
 
-    def __init__(self, render_mode: str | None = None, **options: Any) -> None:
-        self._setup(render_mode, options)
-
     def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[np.ndarray, dict]:
-        super().reset(seed=seed)
-        uniforms = self.np_random.random(self.task.draw_size, dtype=np.float32)
-        refs, noise = self.task.episodes(uniforms[:, None])
-        obs = np.clip(initial_observation(self.task, refs[:, 0], noise[:, 0])[:, 0], self._low, self._high)
-        self._refs = refs[:, :, 0].T.tolist()
-        self._noise = noise[:, :, 0].T.astype(np.float64).tolist()
+        refs, noise, obs = self._draw_episode(seed)
+        self._refs = refs.T.tolist()
+        self._noise = noise.T.astype(np.float64).tolist()
         self._state = [self.task.initial_plant_floats(), [0.0, 0.0], [0.0, 0.0], 0.0]
-        self._t = 0
         if self.render_mode:
             valve = self.task.valve_positions(self._state[0])
             self._history = [[obs[0] / 100.0, obs[1] / 100.0, *self._refs[0], valve[0], valve[1]]]

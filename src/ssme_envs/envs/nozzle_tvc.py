@@ -13,7 +13,7 @@ import gymnasium as gym
 import numpy as np
 
 from ssme_envs.envs.references import REFERENCE_KINDS, Fault, reference_signals, uniforms_needed, unit_normals
-from ssme_envs.envs.rendering import HistoryRendering
+from ssme_envs.envs.tracking_env import TrackingEnv
 from ssme_envs.models.nozzle import (
     DEFAULT_SUBSTEPS,
     DEFAULT_TORQUE_LIMIT,
@@ -251,20 +251,15 @@ class NozzleTask:
         ref: np.ndarray,
         noise: np.ndarray,
         synced: bool,
-        low: np.ndarray,
-        high: np.ndarray,
     ) -> tuple:
-        """N envs, one step: acts, ref, noise (1, N) (ref may be (1, 1)); observations (N, 6)."""
+        """N envs, one step: acts, ref, noise (1, N); observations (N, 6) float32, unclipped."""
         state, obs, reward, terminated = self.step(
             state, acts[0], t, ref[0], noise[0].astype(np.float64), ARRAY_OPS
         )
-        out = np.stack(obs, axis=1).astype(np.float32)
-        np.maximum(out, low, out=out)
-        np.minimum(out, high, out=out)
-        return state, out, reward, terminated
+        return state, np.stack(obs, axis=1).astype(np.float32), reward, terminated
 
 
-class NozzleTVCEnv(HistoryRendering, gym.Env):
+class NozzleTVCEnv(TrackingEnv):
     """Track a nozzle deflection command with the actuator torque (thrust-vector control).
 
     The plant is the movable nozzle of the VLS launcher's first stage: ``J x'' + b x' + F = tau``
@@ -310,25 +305,17 @@ class NozzleTVCEnv(HistoryRendering, gym.Env):
     render_mode : "human" or "rgb_array".
     """
 
-    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 25}
     output_names = ("nozzle angle",)
     actuator_names = ("torque",)
     display_scale = DEG
     display_units = ("deg", "fraction of full scale")
     build_task: Callable[..., NozzleTask] = staticmethod(NozzleTask.build)
 
-    def __init__(self, render_mode: str | None = None, **options: Any) -> None:
-        self._setup(render_mode, options)
-
     def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[np.ndarray, dict]:
-        super().reset(seed=seed)
-        uniforms = self.np_random.random(self.task.draw_size, dtype=np.float32)
-        refs, noise = self.task.episodes(uniforms[:, None])
-        self._refs = refs[0, :, 0].tolist()
-        self._noise = noise[0, :, 0].astype(np.float64).tolist()
-        obs = np.clip(self.task.initial_observation(refs[:, 0], noise[:, 0])[:, 0], self._low, self._high)
+        refs, noise, obs = self._draw_episode(seed)
+        self._refs = refs[0].tolist()
+        self._noise = noise[0].astype(np.float64).tolist()
         self._state = [0.0] * 7
-        self._t = 0
         if self.render_mode:
             self._history = [[float(obs[0]) / DEG, self._refs[0], 0.0]]
         return obs, {}

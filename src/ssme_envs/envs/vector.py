@@ -3,8 +3,8 @@
 One class, :class:`TrackingVectorEnv`, serves every tracking task (engine, throttle, nozzle).
 A task provides ``horizon``, ``n_actions``, ``observation_space()``, ``draw_size``,
 ``episodes(uniforms, noise_out)``, ``shared_references``, ``zero_state(n)``,
-``initial_observation(refs, noise)`` and ``batch_step(state, actions, t, refs, noise, synced,
-low, high)``. Sub-env ``i`` is seeded with ``seed + i`` and draws its episodes from its own
+``initial_observation(refs, noise)`` and ``batch_step(state, actions, t, refs, noise, synced)``.
+Sub-env ``i`` is seeded with ``seed + i`` and draws its episodes from its own
 generator exactly as the scalar env does, so the vector env equals gymnasium's
 ``SyncVectorEnv`` of the scalar env bit for bit, in either autoreset mode.
 """
@@ -150,8 +150,10 @@ class TrackingVectorEnv(VectorEnv):
             else:
                 refs = np.take(self._refs.reshape(len(self._refs), -1), flat, axis=1)
         self._state, obs, reward, terminated = task.batch_step(
-            self._state, clipped, t, refs, noise, self._synced, self._low, self._high
+            self._state, clipped, t, refs, noise, self._synced
         )
+        np.maximum(obs, self._low, out=obs)  # into the observation bounds, as the scalar envs do
+        np.minimum(obs, self._high, out=obs)
         truncated = t >= self._limit
         infos: dict[str, Any] = {}
         if self.metadata["autoreset_mode"] == AutoresetMode.NEXT_STEP:
