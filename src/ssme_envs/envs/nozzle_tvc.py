@@ -15,28 +15,43 @@ import numpy as np
 from ssme_envs.envs.references import REFERENCE_KINDS, Fault, reference_signals, uniforms_needed, unit_normals
 from ssme_envs.envs.tracking_env import TrackingEnv
 from ssme_envs.models.nozzle import (
-    DEFAULT_SUBSTEPS,
     DEFAULT_TORQUE_LIMIT,
     NOZZLE_DT,
     NozzleCore,
     NozzleModel,
     NozzleParameters,
-    _rk4,
     identified_nozzle,
     published_nozzle,
     recommended_substeps,
+    rk4_arrays,
+    rk4_floats,
 )
 
 DEG = 180.0 / math.pi
+# RK4 substeps per sample by h * rate <= 0.25 (models.nozzle.recommended_substeps): 3 for Table 1,
+# within 3e-4 of the motion (9e-4 deg on 3 deg, a sixth of the default sensor noise) where 4
+# substeps give 2e-4 at a third more cost (experiments/results/nozzle_integration_accuracy.md).
+ENV_STEP_RATE = 0.25
 NOZZLE_FAULTS = ("sensor_bias", "gain_loss")
 OBS_NAMES = ("angle_deg", "rate_deg_s", "ref_deg", "err_deg", "err_int_deg_s", "prev_action")
 
 # The step below runs on Python floats (one env) and on (N,) arrays (the vector env) with the
-# same IEEE operations; only selection and clipping differ by carrier.
+# same IEEE operations; only selection, clipping and the integrator's carrier differ.
 FLOAT_OPS = SimpleNamespace(
-    where=lambda cond, a, b: a if cond else b, clip=lambda x, lo, hi: min(max(x, lo), hi)
+    where=lambda cond, a, b: a if cond else b,
+    clip=lambda x, lo, hi: min(max(x, lo), hi),
+    integrate=lambda plant, tau, h, steps, p: rk4_floats(*plant, tau, h, steps, p),
 )
-ARRAY_OPS = SimpleNamespace(where=np.where, clip=lambda x, lo, hi: np.minimum(np.maximum(x, lo), hi))
+
+
+def _integrate_in_place(plant: np.ndarray, tau: np.ndarray, h: float, steps: int, p: Any) -> np.ndarray:
+    rk4_arrays(plant, tau, h, steps, p)
+    return plant
+
+
+ARRAY_OPS = SimpleNamespace(
+    where=np.where, clip=lambda x, lo, hi: np.minimum(np.maximum(x, lo), hi), integrate=_integrate_in_place
+)
 
 
 def resolve_nozzle(plant: str | Path | NozzleParameters | NozzleModel) -> NozzleParameters:
@@ -119,7 +134,7 @@ class NozzleTask:
             rate_limit = _number("rate_limit", rate_limit, 0.0, math.inf, low_open=True)
         envelope = math.radians(6.0)
         if substeps is None:
-            substeps = max(DEFAULT_SUBSTEPS, recommended_substeps(params, NOZZLE_DT, envelope))
+            substeps = recommended_substeps(params, NOZZLE_DT, envelope, ENV_STEP_RATE)
         elif not isinstance(substeps, int) or isinstance(substeps, bool) or not 1 <= substeps <= 1000:
             raise ValueError(f"substeps must be an integer in 1-1000, got {substeps!r}")
         parsed = Fault.parse(fault, 1, 1)
@@ -189,9 +204,10 @@ class NozzleTask:
         return refs, noise
 
     def zero_state(self, n: int) -> list:
-        """[angle, rate, hysteresis w, actuator torque, last measurement, error integral,
-        previous action], each (n,), at rest (the rate estimate starts from the rest angle)."""
-        return [np.zeros(n) for _ in range(7)]
+        """[plant (3, n): angle, rate, hysteresis w; then each (n,): actuator torque, last
+        measurement, error integral, previous action], at rest (the rate estimate starts from
+        the rest angle)."""
+        return [np.zeros((3, n))] + [np.zeros(n) for _ in range(4)]
 
     def initial_observation(self, ref: np.ndarray, draws: np.ndarray) -> np.ndarray:
         """Observations at reset (6, N) float32 from the first reference and noise rows (1, N)."""
@@ -211,7 +227,7 @@ class NozzleTask:
         """One step on floats (``FLOAT_OPS``) or (N,) arrays (``ARRAY_OPS``): action ``a`` in
         [-1, 1], ``t`` the step index after this step, ``ref`` (rad) and unit ``noise`` at t.
         Returns (state, observation values, reward, terminated)."""
-        x, v, w, torque, m_prev, integral, prev = state
+        plant, torque, m_prev, integral, prev = state
         cmd = a * self.torque_limit
         fault = self.fault
         if fault is not None and fault.kind == "gain_loss":
@@ -222,15 +238,14 @@ class NozzleTask:
         else:
             limit = self.max_torque_change
             torque = torque + ops.clip(target - torque, -limit, limit)
-        x, v, w = _rk4(
-            x,
-            v,
-            w,
+        plant = ops.integrate(
+            plant,
             torque,
             self.dt / self.substeps,
             self.substeps,
             self.float_params if ops is FLOAT_OPS else self.array_params,
         )
+        x = plant[0]
         m = self._measure(x, noise, t, ops)
         e = (ref - m) * DEG
         rate = (m - m_prev) * (DEG / self.dt)
@@ -241,7 +256,7 @@ class NozzleTask:
         reward = -self.error_weight * (e * e) - self.rate_weight * (d * d)
         reward = reward - (self.step_cost_bound * (self.horizon - t + 1)) * terminated
         obs = (m * DEG, rate, ref * DEG, e, integral, a)
-        return [x, v, w, torque, m, integral, a], obs, reward, terminated
+        return [plant, torque, m, integral, a], obs, reward, terminated
 
     def batch_step(
         self,
@@ -265,7 +280,7 @@ class NozzleTVCEnv(TrackingEnv):
     The plant is the movable nozzle of the VLS launcher's first stage: ``J x'' + b x' + F = tau``
     with the flexible joint's restoring torque F hysteretic (Bouc-Wen, Table 1 of the nozzle
     paper) by default, or linear, or any nozzle model.json; RK4 with ``substeps`` per 0.008 s step
-    (4 by default: within 2e-4 deg of a fine-step simulation, tested). Angles in degrees.
+    (3 for Table 1's joint: within 1e-3 deg of a fine-step simulation, tested). Angles in degrees.
 
     ## Action Space
     ``Box(-1, 1, (1,), float32)``: the torque command as a fraction of the actuator's full scale
@@ -315,7 +330,7 @@ class NozzleTVCEnv(TrackingEnv):
         refs, noise, obs = self._draw_episode(seed)
         self._refs = refs[0].tolist()
         self._noise = noise[0].astype(np.float64).tolist()
-        self._state = [0.0] * 7
+        self._state = [(0.0, 0.0, 0.0), 0.0, 0.0, 0.0, 0.0]
         if self.render_mode:
             self._history = [[float(obs[0]) / DEG, self._refs[0], 0.0]]
         return obs, {}
@@ -338,7 +353,7 @@ class NozzleTVCEnv(TrackingEnv):
         )
         self._t = t
         if self.render_mode:
-            self._history.append([obs[0] / DEG, self._refs[t], self._state[3] / self.task.torque_limit])
+            self._history.append([obs[0] / DEG, self._refs[t], self._state[1] / self.task.torque_limit])
             if self.render_mode == "human":
                 self.render()
         out = np.array(obs, dtype=np.float32)

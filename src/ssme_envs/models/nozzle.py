@@ -24,11 +24,12 @@ parameter may differ per nozzle (a population of candidate models in a fit, or r
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import asdict, dataclass
 from functools import cache
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -175,13 +176,10 @@ class NozzleCore:
         if not torque_limit > 0:
             raise ValueError(f"torque_limit must be positive, got {torque_limit!r}")
         p = {key: np.broadcast_to(np.asarray(value, dtype=float), (self.n,)) for key, value in params.items()}
-        self._inv_j = 1.0 / p["J"]
-        self._b, self._k_el, self._k_hys = p["b"], p["k_el"], p["k_hys"]
-        self._beta, self._gamma, self._pow = p["beta_n"], p["gamma_n"], p["n"]
-        hysteretic = bool(np.any(self._k_hys != 0))
-        arrays = (self._inv_j, self._b, self._k_el, self._k_hys, self._beta, self._gamma, self._pow)
-        self._params = (*arrays, hysteretic, np.power, np.sign)
-        self._scalar_params = (*(float(q[0]) for q in arrays), hysteretic, _float_power, _float_sign)
+        self._k_el, self._k_hys = p["k_el"], p["k_hys"]
+        shared = all(np.all(q == q[0]) for q in p.values())
+        self._params = rk4_parameters({k: (float(q[0]) if shared else q) for k, q in p.items()})
+        self._scalar_params = rk4_parameters({k: float(q[0]) for k, q in p.items()})
         self.dt = float(dt)
         self.substeps = int(substeps)
         self.torque_limit = float(torque_limit)
@@ -197,7 +195,7 @@ class NozzleCore:
         """Advance one sample under the (saturated) torque; returns the angles, shape (n,)."""
         tau = np.clip(torque, -self.torque_limit, self.torque_limit)
         if self.n == 1:  # plain floats: an order of magnitude faster than 1-element arrays
-            x, v, w = _rk4(
+            x, v, w = rk4_floats(
                 *(float(c[0]) for c in self.state),
                 float(np.ravel(tau)[0]),
                 self.dt / self.substeps,
@@ -206,8 +204,7 @@ class NozzleCore:
             )
             self.state[:, 0] = (x, v, w)
         else:
-            x, v, w = _rk4(*self.state, tau, self.dt / self.substeps, self.substeps, self._params)
-            self.state = np.stack([x, v, w])
+            rk4_arrays(self.state, tau, self.dt / self.substeps, self.substeps, self._params)
         return self.state[0]
 
     def restoring_torque(self) -> np.ndarray:
@@ -255,7 +252,7 @@ def simulate_nozzle(
         angles = [0.0] * horizon
         for k, torque_k in enumerate(np.ravel(tau).tolist()):
             angles[k] = x
-            x, v, w = _rk4(x, v, w, min(max(torque_k, -limit), limit), h, steps, params)
+            x, v, w = rk4_floats(x, v, w, min(max(torque_k, -limit), limit), h, steps, params)
         out = np.array(angles)
         return out[None] if tau.ndim == 2 else out
     out = np.empty((core.n, horizon))
@@ -266,42 +263,139 @@ def simulate_nozzle(
     return out
 
 
-def _float_power(base: float, exponent: float) -> float:
-    # numpy's power, not Python's: they differ in the last bit, and one nozzle must give the
-    # same bits alone as in a batch.
-    return float(np.power(base, exponent))
+class RK4Parameters(NamedTuple):
+    """The normalized nozzle as the integrators use it: floats, or (N,) arrays per nozzle."""
+
+    inv_j: Any  # 1/J, 1/(kg m^2)
+    b_j: Any  # b/J, 1/s
+    k_el_j: Any  # k_el/J, 1/s^2
+    k_hys_j: Any  # k_hys/J, 1/s^2
+    beta: Any  # beta_n
+    gamma: Any  # gamma_n
+    n: Any
+    w_floor: Any  # floor of |w| in |w|^n, rad
+    hysteretic: bool
 
 
-def _float_sign(q: float) -> float:
-    return (q > 0) * 1.0 - (q < 0) * 1.0  # np.sign's value for any non-NaN float
+def rk4_parameters(norm: dict[str, Any]) -> RK4Parameters:
+    """Integrator parameters from normalized ones (floats or arrays, keyed as
+    :meth:`NozzleParameters.normalized`)."""
+    inv_j = 1.0 / norm["J"]
+    return RK4Parameters(
+        inv_j=inv_j,
+        b_j=norm["b"] * inv_j,
+        k_el_j=norm["k_el"] * inv_j,
+        k_hys_j=norm["k_hys"] * inv_j,
+        beta=norm["beta_n"],
+        gamma=norm["gamma_n"],
+        n=norm["n"],
+        w_floor=np.maximum(1e-30 ** (1.0 / np.asarray(norm["n"])), 1e-300)[()].tolist()
+        if np.ndim(norm["n"]) == 0
+        else np.maximum(1e-30 ** (1.0 / norm["n"]), 1e-300),
+        hysteretic=bool(np.any(np.asarray(norm["k_hys"]) != 0)),
+    )
 
 
-def _rk4(x, v, w, tau, h: float, steps: int, params: tuple):
-    """``steps`` RK4 steps of length h of the normalized nozzle equations.
+# Two carriers of one arithmetic: rk4_floats for one nozzle on Python floats (no array
+# overhead), rk4_arrays for a batch in place. Both run the same IEEE operations in the same order
+# on every nozzle, so a nozzle gives the same bits alone and in a batch (tested). The power is
+# numpy's on both carriers (Python's pow differs from it in the last bit). In the Bouc-Wen law,
+# gamma sign(x' w) is written copysign(gamma, x' w), one operation: the same value wherever it
+# matters (at x' w = 0 either x' = 0 or |w|^n = 0 multiplies it away). |w| is floored where
+# |w|^n = 1e-30 (or at 1e-300): the power of an exact zero takes a slow path in numpy, and below
+# the floor 1 - c |w|^n is exactly 1 either way (for |c| = |beta +- gamma| < 1e13).
 
-    Written with arithmetic operators only, so that it runs on floats (one nozzle) and on
-    arrays (a batch) alike; power and sign come with the parameters, one per carrier.
-    """
-    inv_j, b, k_el, k_hys, beta, gamma, power, hysteretic, power_fn, sign_fn = params
 
-    def deriv(x, v, w):
-        accel = (tau - b * v - k_el * x - k_hys * w) * inv_j
-        if not hysteretic:
-            return v, accel, v
-        q = v * w
-        mag = power_fn(abs(w), power)
-        return v, accel, v * (1.0 - mag * (beta + gamma * sign_fn(q)))
+def rk4_floats(
+    x: float, v: float, w: float, tau: float, h: float, steps: int, p: RK4Parameters
+) -> tuple[float, float, float]:
+    """``steps`` RK4 steps of length h (s) of one nozzle under the torque tau (N m), held.
 
+    x (rad), v (rad/s) and w (rad, normalized hysteresis) in, the same out."""
+    _, b_j, k_el_j, k_hys_j, beta, gamma, n, floor, hys = p
+    accel0 = tau * p.inv_j
+    power, copysign = np.power, math.copysign
     half, sixth = 0.5 * h, h / 6.0
+
+    # The Bouc-Wen rate v (1 - (beta + gamma sign(v w)) |w|^n) written out at each stage: a
+    # function call per stage would cost a tenth of the step.
     for _ in range(steps):
-        x1, v1, w1 = deriv(x, v, w)
-        x2, v2, w2 = deriv(x + half * x1, v + half * v1, w + half * w1)
-        x3, v3, w3 = deriv(x + half * x2, v + half * v2, w + half * w2)
-        x4, v4, w4 = deriv(x + h * x3, v + h * v3, w + h * w3)
-        x = x + sixth * (x1 + 2.0 * (x2 + x3) + x4)
-        v = v + sixth * (v1 + 2.0 * (v2 + v3) + v4)
-        w = w + sixth * (w1 + 2.0 * (w2 + w3) + w4)
+        a1 = accel0 - b_j * v - k_el_j * x - k_hys_j * w
+        w1 = v * (1.0 - (copysign(gamma, v * w) + beta) * float(power(max(abs(w), floor), n))) if hys else v
+        x2, v2, w2 = half * v + x, half * a1 + v, half * w1 + w
+        a2 = accel0 - b_j * v2 - k_el_j * x2 - k_hys_j * w2
+        w2_rate = (
+            v2 * (1.0 - (copysign(gamma, v2 * w2) + beta) * float(power(max(abs(w2), floor), n)))
+            if hys
+            else v2
+        )
+        x3, v3, w3 = half * v2 + x, half * a2 + v, half * w2_rate + w
+        a3 = accel0 - b_j * v3 - k_el_j * x3 - k_hys_j * w3
+        w3_rate = (
+            v3 * (1.0 - (copysign(gamma, v3 * w3) + beta) * float(power(max(abs(w3), floor), n)))
+            if hys
+            else v3
+        )
+        x4, v4, w4 = h * v3 + x, h * a3 + v, h * w3_rate + w
+        a4 = accel0 - b_j * v4 - k_el_j * x4 - k_hys_j * w4
+        w4_rate = (
+            v4 * (1.0 - (copysign(gamma, v4 * w4) + beta) * float(power(max(abs(w4), floor), n)))
+            if hys
+            else v4
+        )
+        x = sixth * ((v2 + v3) * 2.0 + v + v4) + x
+        v = sixth * ((a2 + a3) * 2.0 + a1 + a4) + v
+        w = sixth * ((w2_rate + w3_rate) * 2.0 + w1 + w4_rate) + w
     return x, v, w
+
+
+def rk4_arrays(state: np.ndarray, tau: np.ndarray | float, h: float, steps: int, p: RK4Parameters) -> None:
+    """``steps`` RK4 steps of N nozzles in place: ``state`` (3, N) rows x (rad), v (rad/s), w
+    (rad), torques tau (N,) in N m held over the steps; the arithmetic of :func:`rk4_floats`."""
+    n = state.shape[1]
+    rates = np.empty((4, 3, n))  # the four RK4 stages' derivatives of (x, v, w)
+    stage = np.empty((3, n))
+    tmp, coef = np.empty((2, n))
+    accel0 = np.multiply(tau, p.inv_j)
+    half, sixth = 0.5 * h, h / 6.0
+    # row views made once: taking them costs about as much as an operation on a row
+    state_rows, stage_rows, rate_rows = tuple(state), tuple(stage), [tuple(r) for r in rates]
+
+    def derivative(rows: tuple, out: tuple) -> None:
+        x, v, w = rows
+        x_rate, accel, w_rate = out
+        np.copyto(x_rate, v)
+        np.multiply(p.b_j, v, out=tmp)
+        np.subtract(accel0, tmp, out=accel)
+        np.multiply(p.k_el_j, x, out=tmp)
+        accel -= tmp
+        np.multiply(p.k_hys_j, w, out=tmp)
+        accel -= tmp
+        if not p.hysteretic:
+            np.copyto(w_rate, v)
+            return
+        np.multiply(v, w, out=tmp)
+        np.copysign(p.gamma, tmp, out=coef)
+        np.add(coef, p.beta, out=coef)
+        np.abs(w, out=tmp)
+        np.maximum(tmp, p.w_floor, out=tmp)
+        np.power(tmp, p.n, out=tmp)
+        np.multiply(coef, tmp, out=coef)
+        np.subtract(1.0, coef, out=coef)
+        np.multiply(v, coef, out=w_rate)
+
+    for _ in range(steps):
+        for i, weight in enumerate((half, half, h)):
+            derivative(state_rows if i == 0 else stage_rows, rate_rows[i])
+            np.multiply(weight, rates[i], out=stage)
+            stage += state
+        derivative(stage_rows, rate_rows[3])
+        np.add(rates[1], rates[2], out=stage)
+        stage *= 2.0
+        stage += rates[0]
+        stage += rates[3]
+        stage *= sixth
+        state += stage
 
 
 NOZZLE_MODEL_SCHEMA = "ssme-envs/nozzle-model"
