@@ -1,4 +1,5 @@
-"""NozzleTVC-v0: checkers, native vector == sync vector, hysteresis, RK4 accuracy, bad input."""
+"""NozzleTVC-v0 (and LauncherPitch-v0 for the checkers and the vector env): checkers, native
+vector == sync vector, hysteresis, RK4 accuracy, bad input."""
 
 import warnings
 
@@ -12,28 +13,36 @@ import ssme_envs  # noqa: F401
 from ssme_envs.models.nozzle import published_nozzle, simulate_nozzle
 
 NOZZLE = "ssme_envs/NozzleTVC-v0"
+LAUNCHER = "ssme_envs/LauncherPitch-v0"
 
 
-def test_checkers_pass_without_warnings():
+@pytest.mark.parametrize("env_id", [NOZZLE, LAUNCHER])
+def test_checkers_pass_without_warnings(env_id):
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        check_env(gym.make(NOZZLE).unwrapped)
-        sb3_check(gym.make(NOZZLE).unwrapped)
+        check_env(gym.make(env_id).unwrapped)
+        sb3_check(gym.make(env_id).unwrapped)
     assert [str(w.message) for w in caught] == []
 
 
 @pytest.mark.parametrize(
-    "options",
+    ("env_id", "options"),
     [
-        {},
-        {"actuator_lag": 0.02, "rate_limit": 2e5, "reference": "attitude",
-         "fault": {"kind": "gain_loss", "time": 1.0, "magnitude": 0.5}},
-        {"plant": "linear", "reference": "sine_sweep", "fault": {"kind": "sensor_bias", "time": 0.0}},
+        (NOZZLE, {}),
+        (NOZZLE, {"actuator_lag": 0.02, "rate_limit": 2e5, "reference": "attitude",
+                  "fault": {"kind": "gain_loss", "time": 1.0, "magnitude": 0.5}}),
+        (NOZZLE, {"plant": "linear", "reference": "sine_sweep",
+                  "fault": {"kind": "sensor_bias", "time": 0.0}}),
+        (LAUNCHER, {}),
+        (LAUNCHER, {"plant": "linear", "reference": "attitude",
+                    "fault": {"kind": "gain_loss", "time": 2.0, "magnitude": 0.5}}),
+        (LAUNCHER, {"plant": "identified", "reference": "sine_sweep", "episode_seconds": 4.0,
+                    "fault": {"kind": "sensor_bias", "time": 1.0}}),
     ],
 )  # fmt: skip
-def test_native_vector_env_equals_sync_vector_env_over_600_steps(options):
-    sync = gym.make_vec(NOZZLE, num_envs=3, vectorization_mode="sync", **options)
-    native = gym.make_vec(NOZZLE, num_envs=3, vectorization_mode="vector_entry_point", **options)
+def test_native_vector_env_equals_sync_vector_env_over_600_steps(env_id, options):
+    sync = gym.make_vec(env_id, num_envs=3, vectorization_mode="sync", **options)
+    native = gym.make_vec(env_id, num_envs=3, vectorization_mode="vector_entry_point", **options)
     a, b = sync.reset(seed=4), native.reset(seed=4)
     np.testing.assert_array_equal(a[0], b[0])
     rng = np.random.default_rng(0)

@@ -31,6 +31,12 @@ def _register() -> None:
         vector_entry_point="ssme_envs.envs.vector:NozzleTVCVectorEnv",
         max_episode_steps=500,
     )
+    register(
+        id="ssme_envs/LauncherPitch-v0",
+        entry_point="ssme_envs.envs.launcher_pitch:LauncherPitchEnv",
+        vector_entry_point="ssme_envs.envs.vector:LauncherPitchVectorEnv",
+        max_episode_steps=500,
+    )
 
 
 _register()

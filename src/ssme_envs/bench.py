@@ -19,7 +19,12 @@ from collections.abc import Callable, Sequence
 import gymnasium as gym
 import numpy as np
 
-ENV_IDS = ("ssme_envs/EngineTracking-v0", "ssme_envs/EngineThrottle-v0", "ssme_envs/NozzleTVC-v0")
+ENV_IDS = (
+    "ssme_envs/EngineTracking-v0",
+    "ssme_envs/EngineThrottle-v0",
+    "ssme_envs/NozzleTVC-v0",
+    "ssme_envs/LauncherPitch-v0",
+)
 VECTOR_SIZES = (1, 64, 1024, 4096)
 SINGLE_ROUND_STEPS = 2000
 

@@ -2,10 +2,12 @@
 
 from ssme_envs.envs.engine_throttle import EngineThrottleEnv
 from ssme_envs.envs.engine_tracking import EngineTrackingEnv
+from ssme_envs.envs.launcher_pitch import LauncherPitchEnv
 from ssme_envs.envs.nozzle_tvc import NozzleTVCEnv
 from ssme_envs.envs.vector import (
     EngineThrottleVectorEnv,
     EngineTrackingVectorEnv,
+    LauncherPitchVectorEnv,
     NozzleTVCVectorEnv,
     TrackingVectorEnv,
 )
@@ -15,6 +17,8 @@ __all__ = [
     "EngineThrottleVectorEnv",
     "EngineTrackingEnv",
     "EngineTrackingVectorEnv",
+    "LauncherPitchEnv",
+    "LauncherPitchVectorEnv",
     "NozzleTVCEnv",
     "NozzleTVCVectorEnv",
     "TrackingVectorEnv",

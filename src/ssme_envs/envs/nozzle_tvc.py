@@ -82,6 +82,32 @@ def _number(name: str, value: Any, low: float, high: float, low_open: bool = Fal
     return float(value)
 
 
+def episode_options(
+    reference: str,
+    amplitude_deg: float,
+    max_amplitude_deg: float,
+    sensor_noise: float,
+    fault: dict | Fault | None,
+    seconds: float,
+    dt: float,
+) -> dict[str, Any]:
+    """The checked episode fields of a nozzle-driven task: horizon, reference, amplitude (rad),
+    noise_std (rad) and fault."""
+    if reference not in REFERENCE_KINDS:
+        raise ValueError(f"unknown reference {reference!r}; choose one of {', '.join(REFERENCE_KINDS)}")
+    amplitude = _number("reference_amplitude_deg", amplitude_deg, 0.0, max_amplitude_deg)
+    parsed = Fault.parse(fault, 1, 1)
+    if parsed is not None and parsed.kind not in NOZZLE_FAULTS:
+        raise ValueError(f"unknown fault kind {parsed.kind!r}; choose one of {NOZZLE_FAULTS}")
+    return {
+        "horizon": round(_number("episode_seconds", seconds, 0.1, 3600.0) / dt),
+        "reference": reference,
+        "amplitude": np.array([math.radians(amplitude)]),
+        "noise_std": _number("sensor_noise", sensor_noise, 0.0, 0.01),
+        "fault": parsed,
+    }
+
+
 @dataclass(frozen=True)
 class NozzleTask:
     """Everything a nozzle tracking episode needs, shared by the scalar and the vector env."""
@@ -124,11 +150,9 @@ class NozzleTask:
         substeps: int | None = None,
     ) -> NozzleTask:
         params = resolve_nozzle(plant)
-        if reference not in REFERENCE_KINDS:
-            raise ValueError(f"unknown reference {reference!r}; choose one of {', '.join(REFERENCE_KINDS)}")
-        amplitude = _number("reference_amplitude_deg", reference_amplitude_deg, 0.0, 3.0)
-        noise = _number("sensor_noise", sensor_noise, 0.0, 0.01)
-        seconds = _number("episode_seconds", episode_seconds, 0.1, 3600.0)
+        episode = episode_options(
+            reference, reference_amplitude_deg, 3.0, sensor_noise, fault, episode_seconds, NOZZLE_DT
+        )
         lag = _number("actuator_lag", actuator_lag, 0.0, 1.0)
         if rate_limit is not None:
             rate_limit = _number("rate_limit", rate_limit, 0.0, math.inf, low_open=True)
@@ -137,19 +161,10 @@ class NozzleTask:
             substeps = recommended_substeps(params, NOZZLE_DT, envelope, ENV_STEP_RATE)
         elif not isinstance(substeps, int) or isinstance(substeps, bool) or not 1 <= substeps <= 1000:
             raise ValueError(f"substeps must be an integer in 1-1000, got {substeps!r}")
-        parsed = Fault.parse(fault, 1, 1)
-        if parsed is not None and parsed.kind not in NOZZLE_FAULTS:
-            raise ValueError(
-                f"unknown fault kind {parsed.kind!r} for the nozzle; choose one of {NOZZLE_FAULTS}"
-            )
         return cls(
             plant=params,
             substeps=substeps,
-            horizon=round(seconds / NOZZLE_DT),
-            reference=reference,
-            amplitude=np.array([math.radians(amplitude)]),
-            noise_std=noise,
-            fault=parsed,
+            **episode,
             lag_gain=1.0 if lag == 0 else -math.expm1(-NOZZLE_DT / lag),
             max_torque_change=math.inf if rate_limit is None else rate_limit * NOZZLE_DT,
             envelope=envelope,
@@ -335,13 +350,19 @@ class NozzleTVCEnv(TrackingEnv):
             self._history = [[float(obs[0]) / DEG, self._refs[0], 0.0]]
         return obs, {}
 
+    action_meaning = "the torque command"
+
+    def _actuator_fraction(self) -> float:
+        """The actuator's value for the rendered history, as a fraction of its full scale."""
+        return self._state[1] / self.task.torque_limit
+
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict]:
         try:
             if len(action) != 1:
                 raise ValueError
             a = float(action[0])
         except (TypeError, ValueError, IndexError):
-            raise ValueError(f"action must be 1 number (the torque command), got {action!r}") from None
+            raise ValueError(f"action must be 1 number ({self.action_meaning}), got {action!r}") from None
         if not math.isfinite(a):
             raise ValueError(f"action must be finite, got {a} (NaN or inf)")
         if self._t >= self.task.horizon:
@@ -353,7 +374,7 @@ class NozzleTVCEnv(TrackingEnv):
         )
         self._t = t
         if self.render_mode:
-            self._history.append([obs[0] / DEG, self._refs[t], self._state[1] / self.task.torque_limit])
+            self._history.append([obs[0] / DEG, self._refs[t], self._actuator_fraction()])
             if self.render_mode == "human":
                 self.render()
         out = np.array(obs, dtype=np.float32)

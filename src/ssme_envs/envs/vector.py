@@ -22,6 +22,7 @@ from gymnasium.vector.utils import batch_space
 
 from ssme_envs.envs.engine_throttle import ThrottleTask
 from ssme_envs.envs.engine_tracking import EngineTask
+from ssme_envs.envs.launcher_pitch import LauncherTask
 from ssme_envs.envs.nozzle_tvc import NozzleTask
 
 
@@ -218,3 +219,9 @@ class NozzleTVCVectorEnv(TrackingVectorEnv):
     """``num_envs`` copies of :class:`~ssme_envs.envs.nozzle_tvc.NozzleTVCEnv` as one batch."""
 
     build_task = staticmethod(NozzleTask.build)
+
+
+class LauncherPitchVectorEnv(TrackingVectorEnv):
+    """``num_envs`` copies of :class:`~ssme_envs.envs.launcher_pitch.LauncherPitchEnv` as one batch."""
+
+    build_task = staticmethod(LauncherTask.build_launcher)

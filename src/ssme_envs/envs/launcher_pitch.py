@@ -1,0 +1,225 @@
+"""Pitch attitude of a launcher steered by its movable nozzle, the nozzle's dynamics in the loop."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import SimpleNamespace
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import scipy.linalg
+
+from ssme_envs.envs.nozzle_tvc import (
+    ARRAY_OPS,
+    DEG,
+    FLOAT_OPS,
+    NozzleTask,
+    NozzleTVCEnv,
+    _number,
+    episode_options,
+    resolve_nozzle,
+)
+from ssme_envs.envs.references import Fault
+from ssme_envs.models.nozzle import NozzleModel, NozzleParameters
+
+LAUNCHER_DT = 0.02  # s, a 50 Hz attitude loop
+SERVO_SUBSTEPS = 10  # nozzle servo and integration steps per attitude step: a 500 Hz servo
+SERVO_BANDWIDTH_HZ = 15.0
+SERVO_DAMPING = 0.7
+OBS_NAMES = ("attitude_deg", "rate_deg_s", "ref_deg", "err_deg", "err_int_deg_s", "nozzle_deg", "prev_action")
+
+
+def nozzle_servo_gains(plant: NozzleParameters) -> tuple[float, float, float]:
+    """Gains (feedforward, proportional, derivative) of the nozzle's position servo
+    ``tau = k_ff d_cmd - k_p d - k_d d'`` (N m/rad, N m/rad, N m s/rad).
+
+    Designed on the joint's small-signal (linear) stiffness k: with ``k_ff = k + k_p`` the linear
+    joint follows a constant command exactly, and ``J d'' + (b + k_d) d' + (k + k_p) d = k_ff d_cmd``
+    has 15 Hz natural frequency and 0.7 damping (gains floored at zero for a joint that is
+    already stiffer or better damped). The hysteretic part of a Bouc-Wen joint is what this
+    design does not see.
+    """
+    omega = 2.0 * math.pi * SERVO_BANDWIDTH_HZ
+    k = plant.small_signal_stiffness
+    k_p = max(plant.J * omega**2 - k, 0.0)
+    k_d = max(2.0 * SERVO_DAMPING * plant.J * omega - plant.b, 0.0)
+    return k + k_p, k_p, k_d
+
+
+def body_transition(instability: float, effectiveness: float, h: float) -> tuple[float, ...]:
+    """Exact discretization over h (s) of ``theta'' = mu_a theta + mu_c d`` with d linear
+    between samples (first-order hold): ``(theta, q)+ = Phi (theta, q) + G0 d_k + G1 d_k+1``.
+    Returns Phi00, Phi01, Phi10, Phi11, G0_theta, G0_q, G1_theta, G1_q."""
+    m = np.zeros((4, 4))
+    m[0, 1] = 1.0
+    m[1, 0] = instability
+    m[1, 2] = effectiveness
+    m[2, 3] = 1.0 / h
+    e = scipy.linalg.expm(m * h)
+    phi, ramp_start, ramp = e[:2, :2], e[:2, 2], e[:2, 3]
+    g0, g1 = ramp_start - ramp, ramp
+    return (*phi.ravel().tolist(), *g0.tolist(), *g1.tolist())
+
+
+@dataclass(frozen=True)
+class LauncherTask(NozzleTask):
+    """A launcher pitch episode: the nozzle task's plant, references, noise and faults, with a
+    rigid body around the nozzle and a position servo inside it."""
+
+    instability: float = 3.0  # mu_a = (normal force slope x CP-CG arm) / pitch inertia, 1/s^2
+    effectiveness: float = 12.0  # mu_c = thrust x gimbal-CG arm / pitch inertia, 1/s^2 per rad
+    max_deflection: float = math.radians(3.0)  # rad, the action's full scale
+    servo: tuple = field(init=False, repr=False)
+    body: tuple = field(init=False, repr=False)
+
+    @classmethod
+    def build_launcher(
+        cls,
+        plant: str | Path | NozzleParameters | NozzleModel = "bouc_wen",
+        reference: str = "random_steps",
+        reference_amplitude_deg: float = 2.0,
+        sensor_noise: float = 1e-4,
+        fault: dict | Fault | None = None,
+        episode_seconds: float = 10.0,
+        instability: float = 3.0,
+        effectiveness: float = 12.0,
+    ) -> LauncherTask:
+        return cls(
+            plant=resolve_nozzle(plant),
+            substeps=SERVO_SUBSTEPS,
+            **episode_options(
+                reference, reference_amplitude_deg, 5.0, sensor_noise, fault, episode_seconds, LAUNCHER_DT
+            ),
+            dt=LAUNCHER_DT,
+            envelope=math.radians(10.0),
+            instability=_number("instability", instability, 0.0, 100.0),
+            effectiveness=_number("effectiveness", effectiveness, 0.0, 1000.0, low_open=True),
+        )
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        object.__setattr__(self, "servo", nozzle_servo_gains(self.plant))
+        h = self.dt / self.substeps
+        object.__setattr__(self, "body", body_transition(self.instability, self.effectiveness, h))
+
+    @staticmethod
+    def observation_space() -> gym.spaces.Box:
+        high = np.array([20, 200, 10, 30, 10, 20, 1], dtype=np.float32)
+        return gym.spaces.Box(-high, high, dtype=np.float32)
+
+    def zero_state(self, n: int) -> list:
+        """[nozzle (3, n): angle, rate, hysteresis w; then each (n,): pitch attitude (rad),
+        pitch rate (rad/s), error integral, previous action], at rest."""
+        return [np.zeros((3, n))] + [np.zeros(n) for _ in range(4)]
+
+    def initial_observation(self, ref: np.ndarray, draws: np.ndarray) -> np.ndarray:
+        """Observations at reset (7, N) float32 from the first reference and noise rows (1, N)."""
+        m = self._measure(0.0, np.asarray(draws[0], dtype=np.float64), 0, ARRAY_OPS)
+        zeros = np.zeros_like(m)
+        return np.stack([m * DEG, zeros, ref[0] * DEG, (ref[0] - m) * DEG, zeros, zeros, zeros]).astype(
+            np.float32
+        )
+
+    def step(self, state: list, a: Any, t: Any, ref: Any, noise: Any, ops: SimpleNamespace) -> tuple:
+        """One attitude step on floats or (N,) arrays, as :meth:`NozzleTask.step`: the nozzle
+        command ``a`` in [-1, 1] of 3 deg; returns (state, observation values, reward, terminated)."""
+        nozzle, theta, q, integral, prev = state
+        feedforward, k_p, k_d = self.servo
+        drive = feedforward * (a * self.max_deflection)
+        lim = self.torque_limit
+        fault = self.fault
+        gain_loss = fault is not None and fault.kind == "gain_loss"
+        p00, p01, p10, p11, g0_theta, g0_q, g1_theta, g1_q = self.body
+        h = self.dt / self.substeps
+        params = self.float_params if ops is FLOAT_OPS else self.array_params
+        for _ in range(self.substeps):
+            d = nozzle[0]
+            torque = ops.clip(drive - k_p * d - k_d * nozzle[1], -lim, lim)
+            if gain_loss:
+                torque = ops.where(t > self.fault_step, torque * fault.magnitude, torque)
+            # the body's share of the old deflection is taken before the nozzle moves (in place)
+            theta_next = p00 * theta + p01 * q + g0_theta * d
+            q_next = p10 * theta + p11 * q + g0_q * d
+            nozzle = ops.integrate(nozzle, torque, h, 1, params)
+            d = nozzle[0]
+            theta, q = theta_next + g1_theta * d, q_next + g1_q * d
+        m = self._measure(theta, noise, t, ops)
+        e = (ref - m) * DEG
+        limit = self.integral_limit
+        integral = ops.clip(integral + e * self.dt, -limit, limit)
+        change = a - prev
+        terminated = abs(theta) > self.envelope
+        reward = -self.error_weight * (e * e) - self.rate_weight * (change * change)
+        reward = reward - (self.step_cost_bound * (self.horizon - t + 1)) * terminated
+        obs = (m * DEG, q * DEG, ref * DEG, e, integral, nozzle[0] * DEG, a)
+        return [nozzle, theta, q, integral, a], obs, reward, terminated
+
+
+class LauncherPitchEnv(NozzleTVCEnv):
+    """Track a pitch attitude command on an aerodynamically unstable launcher with the nozzle.
+
+    Pitch plane, rigid body, small angles: ``theta'' = mu_a theta + mu_c d`` with ``mu_a = 3
+    1/s^2`` (centre of pressure ahead of the centre of mass: an unstable pole at 1.7 rad/s, the
+    attitude doubles in 0.4 s) and ``mu_c = 12 1/s^2`` per rad of nozzle deflection d. These two
+    numbers are illustrative (the order of a launcher near maximum dynamic pressure), not VLS
+    data. The nozzle is the NozzleTVC plant (Table 1's Bouc-Wen joint by default) inside a 500 Hz
+    position servo designed on its linear stiffness (15 Hz, 0.7 damping, stiffness
+    feedforward; torque limit 3e4 N m): the servo does not see the joint's hysteresis, the
+    attitude loop does. The body is integrated exactly with the deflection linear between servo
+    samples, the nozzle by RK4 at each 2 ms servo sample.
+
+    ## Action Space
+    ``Box(-1, 1, (1,), float32)``: the nozzle deflection command as a fraction of 3 deg. Out-of-
+    range actions are clipped; NaN or inf raises ValueError.
+
+    ## Observation Space
+    ``Box((7,), float32)``, finite bounds, clipped into them:
+
+    | index | observation | unit | bound |
+    |---|---|---|---|
+    | 0 | measured attitude (sensor noise ``sensor_noise`` rad) | deg | +-20 |
+    | 1 | pitch rate (rate gyro) | deg/s | +-200 |
+    | 2 | attitude reference | deg | +-10 |
+    | 3 | tracking error (reference - measured) | deg | +-30 |
+    | 4 | integral of the error (anti-windup at +-10) | deg s | +-10 |
+    | 5 | nozzle deflection | deg | +-20 |
+    | 6 | previous action | - | +-1 |
+
+    ## Rewards
+    ``-0.1 e^2 - 0.1 (a_k - a_(k-1))^2`` with the error in degrees. Leaving the envelope (attitude
+    beyond 10 deg: the vehicle is lost) ends the episode with a penalty larger than the worst cost
+    of all remaining steps.
+
+    ## Starting State
+    At rest on the reference trajectory: zero attitude, rate and nozzle state.
+
+    ## Episode End
+    Termination on leaving the envelope; truncation after ``episode_seconds`` (10 s, 500 steps
+    of 0.02 s).
+
+    ## Arguments
+    plant : "bouc_wen" (default), "linear", "identified", a nozzle model.json path or a model.
+    reference : as NozzleTVC ("random_steps" by default); reference_amplitude_deg (0-5, default
+    2). sensor_noise (rad, default 1e-4). fault : ``{"kind": "gain_loss", "time": 5.0,
+    "magnitude": 0.5}`` (servo torque) or ``{"kind": "sensor_bias", "time": 5.0, "magnitude":
+    0.005}`` (attitude, rad). episode_seconds; instability, effectiveness (mu_a, mu_c in
+    1/s^2). render_mode : "human" or "rgb_array".
+    """
+
+    output_names = ("pitch attitude",)
+    actuator_names = ("nozzle deflection",)
+    display_scale = DEG
+    display_units = ("deg", "fraction of 3 deg")
+    build_task: Callable[..., LauncherTask] = staticmethod(LauncherTask.build_launcher)
+
+    action_meaning = "the nozzle deflection command"
+
+    def _actuator_fraction(self) -> float:
+        return self._state[0][0] / self.task.max_deflection
+
+
+__all__ = ["OBS_NAMES", "LauncherPitchEnv", "LauncherTask", "body_transition", "nozzle_servo_gains"]
