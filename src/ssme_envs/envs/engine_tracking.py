@@ -70,6 +70,17 @@ def resolve_plant(plant: str | Path | AlphaCanonicalModel, power: float) -> Alph
     raise ValueError(f"plant must be 'truth', 'identified', a model.json path or a model, got {plant!r}")
 
 
+def design_model(power: float, source: str = "identified") -> AlphaCanonicalModel:
+    """The linear engine model a controller is designed on at ``power`` % (lambda and the valve
+    effects left out): ``"identified"``, the packaged design model identified at the Table I
+    level nearest to ``power``, or ``"truth"``, the published (linked) model at ``power``."""
+    if source == "truth":
+        return LinkedEngineModel().local_model(power)
+    if source == "identified":
+        return identified_model(int(min(POWER_LEVELS, key=lambda level: abs(level - power))))
+    raise ValueError(f"design model source must be 'identified' or 'truth', got {source!r}")
+
+
 @dataclass(frozen=True)
 class EngineTask:
     """Everything an engine tracking episode needs, shared by the scalar and the vector env."""
@@ -83,6 +94,7 @@ class EngineTask:
     reference: str
     noise_std: np.ndarray
     fault: Fault | None
+    operating_power: float = 100.0  # %, the power level of the point model
     error_weight: float = 0.1
     rate_weight: float = 0.1
     envelope: float = 0.1  # tracking error (noise-free, normalized) that ends an episode (10 %)
@@ -150,6 +162,7 @@ class EngineTask:
             reference=reference,
             noise_std=noise,
             fault=Fault.parse(fault, 2, 2),
+            operating_power=power,
         )
 
     def __post_init__(self) -> None:
@@ -176,6 +189,10 @@ class EngineTask:
 
     n_actions = 2  # OPOV, FPOV
     n_channels = 2  # Pc, MR
+
+    def design_model(self, source: str = "identified") -> AlphaCanonicalModel:
+        """The linear model a controller is designed on: :func:`design_model` at the env's power."""
+        return design_model(self.operating_power, source)
 
     @staticmethod
     def observation_space() -> gym.spaces.Box:

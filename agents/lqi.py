@@ -1,0 +1,224 @@
+"""LQ servo with integral action and a Kalman filter, designed on an env's linear design model.
+
+The design model ``x+ = A x + B u, y = C x`` is augmented with the previous input and the error
+integrals, ``z = [x; u_(k-1); q]`` driven by the input change ``du``:
+
+    x+ = A x + B u_(k-1) + B du,   u_k = u_(k-1) + du,   q+ = q + r - C x,
+
+so that the LQ cost ``e' Qe e + du' R du + q' Qi q`` is the env's reward (errors and action
+changes) plus a small integral weight that removes steady-state error on a mismatched plant.
+``scipy.linalg.solve_discrete_are`` gives the gain; a steady-state Kalman filter (the dual
+Riccati equation) estimates x from the measured outputs; a reference feedforward moves the
+regulation target to ``(x_ss, u_ss)`` with ``A x_ss + B u_ss = x_ss``, ``C x_ss = r``. Integration
+stops while the input saturates (anti-windup).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from types import SimpleNamespace
+from typing import Any
+
+import numpy as np
+import scipy.linalg
+
+from agents.base import BatchController
+from agents.plants import LinearDesign, linear_design
+
+
+@dataclass(frozen=True)
+class ServoDesign:
+    """Gains of the LQ servo on one design model (all arrays 2-D, model units)."""
+
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    gain: np.ndarray  # (m, n + m + p): du = -gain @ (z - z_target)
+    kalman: np.ndarray  # (n, p): x_hat = x_pred + kalman (y - C x_pred)
+    target: np.ndarray  # (n + m, p): [x_ss; u_ss] = target @ r
+    cost_to_go: np.ndarray  # (n + m + p, n + m + p), the Riccati solution (MPC terminal cost)
+    a_aug: np.ndarray
+    b_aug: np.ndarray
+    q_aug: np.ndarray
+    r_aug: np.ndarray
+
+
+def augmented(design: LinearDesign, integral_ratio: float) -> tuple[np.ndarray, ...]:
+    """(A_z, B_z, Q_z, R) of the servo model z = [x; u_(k-1); q] with input du."""
+    a, b, c = design.A, design.B, design.C
+    n, m, p = a.shape[0], b.shape[1], c.shape[0]
+    a_z = np.block([
+        [a, b, np.zeros((n, p))],
+        [np.zeros((m, n)), np.eye(m), np.zeros((m, p))],
+        [-c, np.zeros((p, m)), np.eye(p)],
+    ])  # fmt: skip
+    b_z = np.vstack([b, np.eye(m), np.zeros((p, m))])
+    q_z = scipy.linalg.block_diag(
+        design.error_weight * c.T @ c,
+        1e-6 * design.rate_weight * np.eye(m),  # keeps the input modes detectable
+        integral_ratio * design.error_weight * np.eye(p),
+    )
+    return a_z, b_z, q_z, design.rate_weight * np.eye(m)
+
+
+def design_servo(
+    design: LinearDesign, integral_ratio: float = 0.02, process_ratio: float = 1.0
+) -> ServoDesign:
+    """The LQ servo gains and the Kalman gain on a design model.
+
+    integral_ratio : weight of the error integrals relative to the errors' (per sample).
+    process_ratio : the Kalman filter's process noise, an input disturbance of this many
+        percent of the input's range (the model's error: larger trusts the measurements more).
+    """
+    a_z, b_z, q_z, r = augmented(design, integral_ratio)
+    p_z = scipy.linalg.solve_discrete_are(a_z, b_z, q_z, r)
+    gain = np.linalg.solve(r + b_z.T @ p_z @ b_z, b_z.T @ p_z @ a_z)
+    a, b, c = design.A, design.B, design.C
+    n, m, p = a.shape[0], b.shape[1], c.shape[0]
+    disturbance = 0.01 * process_ratio * design.input_limit
+    proc = disturbance**2 * (b @ b.T + 1e-6 * np.max(np.abs(b)) ** 2 * np.eye(n))
+    # a floor for noise-free outputs, far below what the disturbance moves them by
+    meas = np.diag(np.maximum(design.noise_std, 1e-3 * disturbance * np.max(np.abs(c @ b))) ** 2)
+    cov = scipy.linalg.solve_discrete_are(a.T, c.T, proc, meas)
+    kalman = cov @ c.T @ np.linalg.inv(c @ cov @ c.T + meas)
+    square = np.block([[a - np.eye(n), b], [c, np.zeros((p, m))]])
+    target = np.linalg.lstsq(square, np.vstack([np.zeros((n, p)), np.eye(p)]), rcond=None)[0]
+    return ServoDesign(a, b, c, gain, kalman, target, p_z, a_z, b_z, q_z, r)
+
+
+class LQIServo(BatchController):
+    """LQ servo (integral action, Kalman filter) on an env's design model; see the module doc.
+
+    Parameters
+    ----------
+    env : an ssme-envs env (scalar or native vector)
+    design : "identified" (default) or "truth", the model it is designed on
+    integral_ratio, process_ratio : see :func:`design_servo`
+    """
+
+    name = "lqi"
+
+    def __init__(
+        self, env: Any, design: str = "identified", integral_ratio: float = 0.02, process_ratio: float = 1.0
+    ) -> None:
+        super().__init__()
+        self.design = linear_design(env, design)
+        self.servo = design_servo(self.design, integral_ratio, process_ratio)
+
+    def initial_state(self, n: int) -> dict[str, np.ndarray]:
+        s = self.servo
+        return {
+            "x": np.zeros((n, s.A.shape[0])),
+            "u": np.zeros((n, s.B.shape[1])),
+            "q": np.zeros((n, s.C.shape[0])),
+        }
+
+    def compute(self, obs: np.ndarray) -> np.ndarray:
+        y, r = self.design.ports.read(obs)
+        x = servo_estimate(self.servo, self.state, y)
+        du = servo_feedback(self.servo, self.state, x, r)
+        return servo_advance(self.servo, self.state, x, y, r, du, self.design.input_limit) / (
+            self.design.ports.input_scale
+        )
+
+
+# The servo's step in three parts, on a batch: the matrices are shared, (n, ...), or per env,
+# (N, n, ...) for the scheduled servo.
+
+
+def _apply(matrix: np.ndarray, v: np.ndarray) -> np.ndarray:
+    return np.einsum("nij,nj->ni", matrix, v) if matrix.ndim == 3 else v @ matrix.T
+
+
+def servo_estimate(s: ServoDesign | Any, state: dict, y: np.ndarray) -> np.ndarray:
+    """The Kalman filter's estimate of x (N, n) given the measured outputs y (N, p)."""
+    return state["x"] + _apply(s.kalman, y - _apply(s.C, state["x"]))
+
+
+def servo_deviation(s: ServoDesign | Any, state: dict, x: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """z - z_target (N, n + m + p): the augmented state from the reference's steady state."""
+    n, m = s.A.shape[-1], s.B.shape[-1]
+    goal = _apply(s.target, r)
+    return np.concatenate([x - goal[:, :n], state["u"] - goal[:, n : n + m], state["q"]], axis=1)
+
+
+def servo_feedback(s: ServoDesign | Any, state: dict, x: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """The LQ input change du (N, m)."""
+    return -_apply(s.gain, servo_deviation(s, state, x, r))
+
+
+def servo_advance(
+    s: ServoDesign | Any,
+    state: dict,
+    x: np.ndarray,
+    y: np.ndarray,
+    r: np.ndarray,
+    du: np.ndarray,
+    limit: float,
+) -> np.ndarray:
+    """Apply du: the saturated input u (N, m), the integrators (held while saturated) and the
+    filter's prediction. Returns u."""
+    u = np.clip(state["u"] + du, -limit, limit)
+    free = np.all(np.abs(u) < limit, axis=1, keepdims=True)
+    state["q"] = np.where(free, state["q"] + (r - y), state["q"])
+    state["x"] = _apply(s.A, x) + _apply(s.B, u)
+    state["u"] = u
+    return u
+
+
+class ScheduledLQI(BatchController):
+    """Gain-scheduled LQ servo for EngineThrottle: servos designed at several power levels
+    (the identified models at 70-110 %, or the linked truth every 4 % over 65-109 %), their
+    matrices interpolated linearly in the commanded power read from the reference
+    (``P = 100 + Pc reference in %``)."""
+
+    name = "scheduled"
+
+    def __init__(self, env: Any, design: str = "identified", integral_ratio: float = 0.02) -> None:
+        super().__init__()
+        levels = [70.0, 80.0, 90.0, 100.0, 110.0] if design == "identified" else list(range(65, 110, 4))
+        self.levels = np.array(levels, dtype=float)
+        designs = [linear_design(env, design, power=level) for level in levels]
+        self.design = designs[0]
+        servos = [design_servo(d, integral_ratio) for d in designs]
+        self.tables = {
+            key: np.stack([getattr(s, key) for s in servos])
+            for key in ("A", "B", "C", "gain", "kalman", "target")
+        }
+
+    def initial_state(self, n: int) -> dict[str, np.ndarray]:
+        a, b, c = self.tables["A"][0], self.tables["B"][0], self.tables["C"][0]
+        return {
+            "x": np.zeros((n, a.shape[0])),
+            "u": np.zeros((n, b.shape[1])),
+            "q": np.zeros((n, c.shape[0])),
+        }
+
+    def scheduled(self, power: np.ndarray) -> Any:
+        """The servo matrices at each env's power, (N, ...) each."""
+        p = np.clip(power, self.levels[0], self.levels[-1])
+        i = np.clip(np.searchsorted(self.levels, p, side="right") - 1, 0, len(self.levels) - 2)
+        w = ((p - self.levels[i]) / (self.levels[i + 1] - self.levels[i]))[:, None, None]
+        return SimpleNamespace(**{k: (1 - w) * t[i] + w * t[i + 1] for k, t in self.tables.items()})
+
+    def compute(self, obs: np.ndarray) -> np.ndarray:
+        y, r = self.design.ports.read(obs)
+        servo = self.scheduled(100.0 + obs[:, 2])
+        x = servo_estimate(servo, self.state, y)
+        du = servo_feedback(servo, self.state, x, r)
+        return servo_advance(servo, self.state, x, y, r, du, self.design.input_limit) / (
+            self.design.ports.input_scale
+        )
+
+
+__all__ = [
+    "LQIServo",
+    "ScheduledLQI",
+    "ServoDesign",
+    "augmented",
+    "design_servo",
+    "servo_advance",
+    "servo_deviation",
+    "servo_estimate",
+    "servo_feedback",
+]

@@ -1,0 +1,106 @@
+"""PI and PID loops: the SSME-style decoupled PI, and PID by pole placement for the nozzle and the
+launcher's attitude."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from agents.base import DEG, BatchController, task_of
+from agents.plants import linear_design, nozzle_joint
+from ssme_envs.envs.launcher_pitch import LauncherTask
+from ssme_envs.envs.nozzle_tvc import NozzleTask
+
+
+def simc_pi(step: np.ndarray, dt: float) -> tuple[float, float]:
+    """PI gains (Kc, Ki = Kc / tau_I) by Skogestad's SIMC rule from a unit step response
+    sampled at dt: first order plus one sample of delay, tau from the 63 % time, tau_c = delay."""
+    gain = float(step[-1])
+    delay = dt
+    t63 = float(np.argmax(np.abs(step) >= 0.632 * abs(gain))) * dt
+    tau = max(t63 - delay, dt)
+    kc = tau / (gain * 2.0 * delay)
+    return kc, kc / min(tau, 8.0 * delay)
+
+
+class DecoupledPI(BatchController):
+    """Two PI loops in the style of the SSME's own controller: Pc error -> OPOV, MR error -> FPOV,
+    each tuned by SIMC on its own channel of the design model (the cross-coupling ignored).
+    Velocity form, so a saturated valve stops integrating (anti-windup)."""
+
+    name = "pi"
+
+    def __init__(self, env: Any, design: str = "identified") -> None:
+        super().__init__()
+        self.design = linear_design(env, design)
+        d = self.design
+        x = np.zeros((d.A.shape[0], 2))
+        steps = []
+        for _ in range(200):  # unit steps on both valves, one column each
+            steps.append(d.C @ x)
+            x = d.A @ x + d.B
+        response = np.array(steps)  # (T, outputs, inputs)
+        gains = [simc_pi(response[:, i, i], d.dt) for i in range(2)]
+        self.kc = np.array([g[0] for g in gains])
+        self.ki = np.array([g[1] for g in gains])
+
+    def initial_state(self, n: int) -> dict[str, np.ndarray]:
+        return {"u": np.zeros((n, 2)), "e": np.zeros((n, 2))}
+
+    def compute(self, obs: np.ndarray) -> np.ndarray:
+        e = obs[:, 4:6] / 100.0
+        s, limit = self.state, self.design.input_limit
+        s["u"] = np.clip(s["u"] + self.kc * (e - s["e"]) + self.ki * self.design.dt * e, -limit, limit)
+        s["e"] = e
+        return s["u"] / self.design.ports.input_scale
+
+
+def placed_pid(
+    a1: float, a0: float, g: float, omega: float, damping: float = 0.7
+) -> tuple[float, float, float]:
+    """(Kp, Ki, Kd) of ``u = Kp e + Ki int(e) - Kd x'`` on ``x'' + a1 x' + a0 x = g u`` placing
+    the closed-loop poles at ``(s + omega)(s^2 + 2 damping omega s + omega^2)``."""
+    kd = (omega + 2 * damping * omega - a1) / g
+    kp = (omega**2 + 2 * damping * omega**2 - a0) / g
+    return kp, omega**3 / g, kd
+
+
+class PlacedPID(BatchController):
+    """PID by pole placement on the second-order design model: the nozzle (torque -> angle, on the
+    joint's small-signal stiffness, poles at 60 rad/s) or the launcher's rigid body (deflection
+    -> attitude, poles at 4 rad/s). Derivative on the measured rate, conditional integration."""
+
+    name = "pid"
+
+    def __init__(self, env: Any, design: str = "identified", omega: float | None = None) -> None:
+        super().__init__()
+        task = task_of(env)
+        self.design = linear_design(env, design)
+        if isinstance(task, LauncherTask):
+            a1, a0, g, default = 0.0, -task.instability, task.effectiveness, 4.0
+        elif isinstance(task, NozzleTask):
+            joint = nozzle_joint(task, design)
+            a1, a0, g, default = (
+                joint.b / joint.J,
+                joint.small_signal_stiffness / joint.J,
+                1.0 / joint.J,
+                60.0,
+            )
+        else:
+            raise TypeError(f"{self.name} is for NozzleTVC and LauncherPitch, not {type(task).__name__}")
+        self.kp, self.ki, self.kd = placed_pid(a1, a0, g, default if omega is None else omega)
+
+    def initial_state(self, n: int) -> dict[str, np.ndarray]:
+        return {"integral": np.zeros(n)}
+
+    def compute(self, obs: np.ndarray) -> np.ndarray:
+        e, rate = obs[:, 3] / DEG, obs[:, 1] / DEG
+        s, limit = self.state, self.design.input_limit
+        u = self.kp * e + self.ki * s["integral"] - self.kd * rate
+        free = np.abs(u) < limit
+        s["integral"] = np.where(free, s["integral"] + e * self.design.dt, s["integral"])
+        return (u / self.design.ports.input_scale)[:, None]
+
+
+__all__ = ["DecoupledPI", "PlacedPID", "placed_pid", "simc_pi"]

@@ -1,0 +1,100 @@
+"""The linear design model of each env, with the units that map it onto the env's interface."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import scipy.signal
+
+from agents.base import DEG, Ports, task_of
+from ssme_envs.envs.engine_throttle import ThrottleTask
+from ssme_envs.envs.engine_tracking import EngineTask
+from ssme_envs.envs.engine_tracking import design_model as engine_design_model
+from ssme_envs.envs.launcher_pitch import LauncherTask
+from ssme_envs.envs.nozzle_tvc import NozzleTask
+from ssme_envs.models.nozzle import NozzleParameters, identified_nozzle
+
+DESIGN_SOURCES = ("identified", "truth")
+
+
+@dataclass(frozen=True)
+class LinearDesign:
+    """A discrete linear plant ``x+ = A x + B u``, ``y = C x`` to design on, in model units.
+
+    ``error_weight`` and ``rate_weight`` express the env's reward in model units: the cost of a
+    step is ``error_weight |r - y|^2 + rate_weight |u_k - u_(k-1)|^2``.
+    """
+
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    dt: float  # s
+    ports: Ports
+    input_limit: float  # |u| reachable with actions in [-1, 1], model units
+    noise_std: np.ndarray  # (p,), measurement noise, model units
+    error_weight: float
+    rate_weight: float
+
+
+def check_source(source: str) -> str:
+    if source not in DESIGN_SOURCES:
+        raise ValueError(f"design source must be one of {DESIGN_SOURCES}, got {source!r}")
+    return source
+
+
+def nozzle_joint(task: NozzleTask, source: str) -> NozzleParameters:
+    """The nozzle joint to design on: the identified model's (Bouc-Wen when identified, else
+    linear), or the env's own plant."""
+    return identified_nozzle().plant() if check_source(source) == "identified" else task.plant
+
+
+def _continuous(a: np.ndarray, b: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    c = np.zeros((1, a.shape[0]))
+    c[0, 0] = 1.0
+    ad, bd, *_ = scipy.signal.cont2discrete((a, b, c, np.zeros((1, 1))), dt, method="zoh")
+    return ad, bd
+
+
+def linear_design(env: Any, source: str = "identified", power: float | None = None) -> LinearDesign:
+    """The design model of an ssme-envs env (scalar or native vector), from ``source``
+    ("identified": what the identification pipeline produced; "truth": the env's own plant,
+    its nonlinear effects left out). ``power`` (%): the throttle env's model at that level."""
+    task = task_of(env)
+    check_source(source)
+    if isinstance(task, LauncherTask):
+        # the rigid body; the servoed nozzle taken as ideal (its 15 Hz are far above the loop's)
+        a = np.array([[0.0, 1.0], [task.instability, 0.0]])
+        ad, bd = _continuous(a, np.array([[0.0], [task.effectiveness]]), task.dt)
+        return LinearDesign(
+            ad, bd, np.array([[1.0, 0.0]]), task.dt, Ports((0,), (2,), DEG, task.max_deflection),
+            task.max_deflection, np.array([task.noise_std]), task.error_weight * DEG**2,
+            task.rate_weight / task.max_deflection**2,
+        )  # fmt: skip
+    if isinstance(task, NozzleTask):
+        joint = nozzle_joint(task, source)
+        stiffness = joint.small_signal_stiffness
+        a = np.array([[0.0, 1.0], [-stiffness / joint.J, -joint.b / joint.J]])
+        ad, bd = _continuous(a, np.array([[0.0], [1.0 / joint.J]]), task.dt)
+        return LinearDesign(
+            ad, bd, np.array([[1.0, 0.0]]), task.dt, Ports((0,), (2,), DEG, task.torque_limit),
+            task.torque_limit, np.array([task.noise_std]), task.error_weight * DEG**2,
+            task.rate_weight / task.torque_limit**2,
+        )  # fmt: skip
+    if isinstance(task, EngineTask):
+        if isinstance(task, ThrottleTask):
+            model = engine_design_model(100.0 if power is None else float(power), source)
+            # throttle observations: y - y_eq(P) is minus the error, and the reference is 0
+            ports = Ports((4, 5), (), -100.0, task.action_scale)
+        else:
+            model = task.design_model(source)
+            ports = Ports((0, 1), (2, 3), 100.0, task.action_scale)
+        return LinearDesign(
+            model.A, model.B, model.C, model.dt, ports, task.action_scale, task.noise_std.copy(),
+            task.error_weight * 100.0**2, task.rate_weight / task.action_scale**2,
+        )  # fmt: skip
+    raise TypeError(f"no design model for {type(task).__name__}")
+
+
+__all__ = ["DESIGN_SOURCES", "LinearDesign", "check_source", "linear_design", "nozzle_joint"]

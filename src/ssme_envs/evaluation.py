@@ -1,0 +1,292 @@
+"""Evaluation harness: rollouts of any controller over named scenarios, and the metrics engineers read.
+
+A controller is anything with ``reset(seed=..., num_envs=...)`` and ``act(observations)`` on a
+batch (the protocol of the ``agents`` package). Each scenario is a set of env options; its
+episodes run together in the env's native vector env, each one counted until its first end.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+NOISE_OFF = {"backlash": 5e-4, "stiction": 2e-4, "sensor_noise": 0.0}
+LINEAR = {"asymmetric_gains": False, "backlash": 0.0, "stiction": 0.0, "sensor_noise": 0.0}
+
+# name -> env options; the first of each env is its default scenario
+SCENARIOS: dict[str, dict[str, dict[str, Any]]] = {
+    "ssme_envs/EngineTracking-v0": {
+        "pc_step": {"reference": "step", "reference_amplitude": (0.01, 0.0), "truth": NOISE_OFF},
+        "mr_step": {"reference": "step", "reference_amplitude": (0.0, 0.01), "truth": NOISE_OFF},
+        "both_steps": {"reference": "step", "reference_amplitude": 0.01, "truth": NOISE_OFF},
+        "ramp": {"reference": "ramp", "truth": NOISE_OFF},
+        "nominal": {"truth": LINEAR},  # random steps on the published linear model
+        "valves": {"truth": NOISE_OFF},  # + lambda, backlash, stiction
+        "noise": {},  # + sensor noise: the full truth
+        "design_plant": {"plant": "identified", "truth": LINEAR},
+        "stuck_valve": {"fault": {"kind": "stuck_valve", "time": 4.0, "index": 0}},
+        "gain_loss": {"fault": {"kind": "gain_loss", "time": 4.0, "index": 1, "magnitude": 0.5}},
+        "sensor_bias": {"fault": {"kind": "sensor_bias", "time": 4.0, "index": 0, "magnitude": 0.002}},
+    },
+    "ssme_envs/EngineThrottle-v0": {
+        "mission": {},
+        "mission_noise_off": {"truth": NOISE_OFF},
+        "mission_linear": {"truth": LINEAR},
+    },
+    "ssme_envs/NozzleTVC-v0": {
+        "step": {"reference": "step", "sensor_noise": 0.0},
+        "sine_sweep": {"reference": "sine_sweep"},
+        "attitude": {"reference": "attitude"},
+        "random_steps": {},
+        "linear_plant": {"plant": "linear"},
+        "gain_loss": {"fault": {"kind": "gain_loss", "time": 2.0, "magnitude": 0.5}},
+    },
+    "ssme_envs/LauncherPitch-v0": {
+        "step": {"reference": "step", "sensor_noise": 0.0},
+        "attitude": {"reference": "attitude"},
+        "random_steps": {},
+        "linear_nozzle": {"plant": "linear"},
+        "sensor_bias": {"fault": {"kind": "sensor_bias", "time": 5.0, "magnitude": 0.002}},
+    },
+}
+
+
+@dataclass(frozen=True)
+class Layout:
+    """Where an env's observations hold its outputs, references and errors, and their names."""
+
+    outputs: tuple[str, ...]
+    unit: str
+    output_columns: tuple[int, ...]
+    reference_columns: tuple[int, ...]
+    error_columns: tuple[int, ...]
+    actuators: tuple[str, ...]
+
+
+ENGINE = Layout(("Pc", "MR"), "%", (0, 1), (2, 3), (4, 5), ("OPOV", "FPOV"))
+LAYOUTS = {
+    "ssme_envs/EngineTracking-v0": ENGINE,
+    "ssme_envs/EngineThrottle-v0": ENGINE,
+    "ssme_envs/NozzleTVC-v0": Layout(("angle",), "deg", (0,), (2,), (3,), ("torque",)),
+    "ssme_envs/LauncherPitch-v0": Layout(("attitude",), "deg", (0,), (2,), (3,), ("deflection",)),
+}
+
+
+def scenario_names(env_id: str) -> list[str]:
+    check_env_id(env_id)
+    return list(SCENARIOS[env_id])
+
+
+def check_env_id(env_id: str) -> str:
+    if env_id not in SCENARIOS:
+        raise ValueError(f"unknown env {env_id!r}; choose one of {', '.join(SCENARIOS)}")
+    return env_id
+
+
+def make_env(env_id: str, scenario: str, num_envs: int) -> gym.vector.VectorEnv:
+    """The native vector env of a scenario."""
+    if scenario not in SCENARIOS[check_env_id(env_id)]:
+        raise ValueError(
+            f"unknown scenario {scenario!r} for {env_id}; choose one of {', '.join(SCENARIOS[env_id])}"
+        )
+    import ssme_envs  # noqa: F401  (registers the environments)
+
+    return gym.make_vec(
+        env_id, num_envs=num_envs, vectorization_mode="vector_entry_point", **SCENARIOS[env_id][scenario]
+    )
+
+
+@dataclass
+class Rollout:
+    """Episodes of one controller on one scenario, time-major: obs (T + 1, N, d), requested and
+    applied actions (T, N, m), rewards (T, N), alive (T, N) (the step belongs to the first
+    episode), dt (s)."""
+
+    obs: np.ndarray
+    requested: np.ndarray
+    actions: np.ndarray
+    rewards: np.ndarray
+    alive: np.ndarray
+    dt: float
+
+
+def rollout(env: gym.vector.VectorEnv, controller: Any, name: str, seed: int = 0) -> Rollout:
+    """Run every sub-env of ``env`` for one episode under ``controller`` (reset with ``seed``)."""
+    n = env.num_envs
+    task = getattr(env, "task", None) or env.unwrapped.task
+    obs, _ = env.reset(seed=seed)
+    controller.reset(seed=seed, num_envs=n)
+    observations, requested, applied, rewards, alive = [obs], [], [], [], []
+    running = np.ones(n, dtype=bool)
+    for k in range(task.horizon):
+        action = np.asarray(controller.act(obs, {}), dtype=np.float64).reshape(n, -1)
+        bad = ~np.isfinite(action).all(axis=1)
+        if bad.any():
+            raise ValueError(
+                f"controller {name!r} returned a non-finite action {action[bad][0].tolist()} at step {k} "
+                f"(episode {int(np.argmax(bad))})"
+            )
+        clipped = np.clip(action, -1.0, 1.0)
+        obs, reward, terminated, truncated, _ = env.step(clipped.astype(np.float32))
+        requested.append(action)
+        applied.append(clipped)
+        rewards.append(reward)
+        alive.append(running.copy())
+        observations.append(obs)
+        running &= ~(terminated | truncated)
+        if not running.any():
+            break
+    return Rollout(
+        np.array(observations),
+        np.array(requested),
+        np.array(applied),
+        np.array(rewards),
+        np.array(alive),
+        task.dt,
+    )
+
+
+def step_metrics(t: np.ndarray, y: np.ndarray, final: float | None = None, threshold: float = 0.02) -> dict:
+    """Rise time (10-90 %), settling time (within ``threshold`` of the final value for good),
+    overshoot (% of the final value) of a step response y(t) starting from 0; the final value
+    is y's last unless given. The definitions of python-control's ``step_info``."""
+    final = float(y[-1]) if final is None else float(final)
+    if final == 0 or not np.isfinite(final):
+        return {"rise_time": np.nan, "settling_time": np.nan, "overshoot": np.nan}
+    sign = np.sign(final)
+    lower = np.flatnonzero(sign * (y - 0.1 * final) >= 0)
+    upper = np.flatnonzero(sign * (y - 0.9 * final) >= 0)
+    rise = t[upper[0]] - t[lower[0]] if upper.size and lower.size else np.nan
+    outside = np.flatnonzero(np.abs(y / final - 1.0) >= threshold)
+    settled = 0 if outside.size == 0 else outside[-1] + 1
+    settling = t[settled] if settled < len(t) else np.nan
+    overshoot = max(0.0, 100.0 * (np.max(sign * y) - abs(final)) / abs(final))
+    return {"rise_time": float(rise), "settling_time": float(settling), "overshoot": float(overshoot)}
+
+
+def _cvar(costs: np.ndarray, level: float = 0.9) -> float:
+    """Mean of the worst (1 - level) share of the costs (at least one)."""
+    worst = np.sort(costs)[::-1][: max(1, round((1 - level) * len(costs)))]
+    return float(worst.mean())
+
+
+def metrics(run: Rollout, layout: Layout) -> dict[str, Any]:
+    """Per-output tracking and step metrics (means over episodes), actuator wear and limits,
+    and the episode cost (minus the return): mean, std, CVaR 90 %."""
+    alive = run.alive
+    steps = alive.sum(axis=0)
+    returns = (run.rewards * alive).sum(axis=0)
+    costs = -returns
+    t = np.arange(1, len(alive) + 1) * run.dt
+    out: dict[str, Any] = {
+        "episodes": int(alive.shape[1]),
+        "return_mean": float(returns.mean()),
+        "return_std": float(returns.std()),
+        "cost_mean": float(costs.mean()),
+        "cost_cvar90": _cvar(costs),
+        "terminations": int((steps < len(alive)).sum()),
+        "outputs": {},
+        "actuators": {},
+    }
+    step_rows = run.obs[1:]
+    for i, name in enumerate(layout.outputs):
+        e = np.abs(step_rows[:, :, layout.error_columns[i]]) * alive
+        y = step_rows[:, :, layout.output_columns[i]]
+        r = run.obs[:, :, layout.reference_columns[i]]
+        tail = max(1, len(alive) // 10)
+        row = {
+            "iae": float((e.sum(axis=0) * run.dt).mean()),
+            "ise": float(((e**2).sum(axis=0) * run.dt).mean()),
+            "itae": float(((t[:, None] * e).sum(axis=0) * run.dt).mean()),
+            "steady_state_error": float(e[-tail:].mean()),
+        }
+        row.update(_step_response(t, y, r, alive))
+        out["outputs"][name] = row
+    change = np.diff(run.actions, axis=0, prepend=0.0)
+    moving = np.abs(change) > 1e-3
+    for j, name in enumerate(layout.actuators):
+        signs = np.sign(change[:, :, j]) * moving[:, :, j]
+        reversals = ((signs[1:] * signs[:-1]) < 0) & alive[1:]
+        out["actuators"][name] = {
+            "effort_rms": float(np.sqrt((run.actions[:, :, j] ** 2 * alive).sum() / alive.sum())),
+            "travel": float((np.abs(change[:, :, j]) * alive).sum(axis=0).mean()),
+            "reversals": float(reversals.sum(axis=0).mean()),
+            "saturated_steps": float(((np.abs(run.requested[:, :, j]) > 1.0) & alive).sum(axis=0).mean()),
+        }
+    return out
+
+
+def _step_response(t: np.ndarray, y: np.ndarray, r: np.ndarray, alive: np.ndarray) -> dict[str, float]:
+    """Step metrics averaged over the episodes whose reference is one step (NaN otherwise)."""
+    found = []
+    for i in range(y.shape[1]):
+        jumps = np.flatnonzero(np.diff(r[:, i]) != 0)
+        if len(jumps) != 1 or not alive[:, i].all():
+            continue
+        at = jumps[0]  # the reference changes between obs rows at and at + 1 (step at)
+        size = r[at + 1, i] - r[at, i]
+        base = y[at - 1, i] if at > 0 else 0.0
+        response = y[at:, i] - base
+        if len(response) < 10:
+            continue
+        found.append(step_metrics(t[at:] - t[at], response / size, final=1.0))
+    if not found:
+        return {"rise_time": np.nan, "settling_time": np.nan, "overshoot": np.nan}
+    summary = {}
+    for key in found[0]:
+        values = np.array([f[key] for f in found])
+        summary[key] = float(np.nanmean(values)) if np.isfinite(values).any() else np.nan
+    return summary
+
+
+def evaluate(
+    env_id: str,
+    controllers: Mapping[str, Callable[[Any], Any]],
+    scenarios: Sequence[str] | None = None,
+    episodes: int = 20,
+    seed: int = 0,
+    progress: Callable[[str], None] | None = None,
+) -> dict[str, Any]:
+    """Metrics of every controller on every scenario: ``{scenario: {controller: metrics}}``, with
+    one rollout per pair kept in ``"_rollouts"`` for plotting. ``controllers`` maps names to
+    factories ``env -> controller`` (a controller is designed on the scenario's env)."""
+    check_env_id(env_id)
+    if not isinstance(episodes, int) or episodes < 1:
+        raise ValueError(f"episodes must be a positive integer, got {episodes!r}")
+    names = scenario_names(env_id) if scenarios is None else list(scenarios)
+    say = progress or (lambda _: None)
+    results: dict[str, Any] = {"_rollouts": {}}
+    total, done = len(names) * len(controllers), 0
+    for scenario in names:
+        results[scenario] = {}
+        for name, factory in controllers.items():
+            start = time.perf_counter()
+            env = make_env(env_id, scenario, episodes)
+            run = rollout(env, factory(env), name, seed)
+            env.close()
+            results[scenario][name] = metrics(run, LAYOUTS[env_id])
+            results["_rollouts"][(scenario, name)] = run
+            done += 1
+            say(f"[{done}/{total}] {scenario} / {name}: cost {results[scenario][name]['cost_mean']:.3f} "
+                f"({time.perf_counter() - start:.1f} s)")  # fmt: skip
+    return results
+
+
+__all__ = [
+    "LAYOUTS",
+    "SCENARIOS",
+    "Layout",
+    "Rollout",
+    "check_env_id",
+    "evaluate",
+    "make_env",
+    "metrics",
+    "rollout",
+    "scenario_names",
+    "step_metrics",
+]
