@@ -111,7 +111,7 @@ class MPC(BatchController):
         lower = np.concatenate([-limit - u_prev, np.full((n, size), -self.max_change)], axis=1)
         upper = np.concatenate([limit - u_prev, np.full((n, size), self.max_change)], axis=1)
         self._solver.update(q=(z @ self.linear.T).ravel(), l=lower.ravel(), u=upper.ravel())
-        result = self._solver.solve()
+        result = self._solver.solve(raise_error=False)
         if result.info.status_val in (
             osqp.SolverStatus.OSQP_SOLVED,
             osqp.SolverStatus.OSQP_SOLVED_INACCURATE,

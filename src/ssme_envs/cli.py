@@ -1,6 +1,9 @@
 """The ``ssme-envs`` command.
 
-``ssme-envs identify nozzle [--data FILE.csv] --out DIR`` identifies the movable nozzle (DSR_e and
+``ssme-envs report --out DIR`` runs the main job: identify the engine and the nozzle, evaluate every
+controller on every env, write one report.md. ``ssme-envs evaluate --env ID --controllers pi,lqi
+--out DIR`` scores controllers on an env's scenarios. ``ssme-envs identify nozzle [--data FILE.csv]
+--out DIR`` identifies the movable nozzle (DSR_e and
 Bouc-Wen). ``ssme-envs identify engine [--data FILE.csv] --out DIR`` identifies an alpha-canonical engine
 model from a record, or, without ``--data``, runs the embedded experiment on the truth at the
 five Table I power levels. ``ssme-envs validate engine --model model.json --data FILE.csv
@@ -116,6 +119,31 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--sizes", default="1,64,1024,4096", help="vector sizes (default: %(default)s)")
     bench.add_argument("--env", action="append", help="env id to measure (repeatable; default: all)")
     bench.add_argument("--out", type=Path, help="also write the table to this markdown file")
+
+    evaluate = commands.add_parser(
+        "evaluate", help="score controllers on an env's scenarios (results.json, results.md, plots)"
+    )
+    evaluate.add_argument("--env", required=True, help="env id, e.g. ssme_envs/EngineTracking-v0")
+    evaluate.add_argument(
+        "--controllers", help="comma-separated, e.g. pi,lqi,lqi:truth (default: every one for the env)"
+    )
+    evaluate.add_argument("--scenario", help="comma-separated scenario names (default: all of the env's)")
+    evaluate.add_argument(
+        "--episodes", type=int, default=20, help="episodes per scenario (default: %(default)s)"
+    )
+    evaluate.add_argument(
+        "--seed", type=int, default=0, help="seed of the first episode (default: %(default)s)"
+    )
+    evaluate.add_argument("--out", type=Path, required=True, help="output directory")
+
+    report = commands.add_parser(
+        "report",
+        help="the main job: identify the engine and the nozzle, evaluate every controller on every env",
+    )
+    report.add_argument("--out", type=Path, required=True, help="output directory")
+    report.add_argument(
+        "--episodes", type=int, default=20, help="episodes per scenario (default: %(default)s)"
+    )
 
     check = commands.add_parser("validate", help="validate a model.json on input/output records")
     check_plants = check.add_subparsers(dest="plant", required=True, parser_class=_Parser)
@@ -285,6 +313,74 @@ def _bench(args: argparse.Namespace) -> int:
     return 0
 
 
+def _controllers(env_id: str, specs: str | None) -> dict:
+    from agents import controller_names, parse_controller
+
+    names = controller_names(env_id) if specs is None else list(_names(specs, "--controllers"))
+    return {name: parse_controller(name, env_id) for name in names}
+
+
+def _run_evaluation(env_id: str, controllers: dict, scenarios: list[str] | None, episodes: int, out: Path,
+                    command: str) -> tuple[Path, dict]:  # fmt: skip
+    from ssme_envs.evaluation import evaluate
+    from ssme_envs.results import write_evaluation
+
+    results = evaluate(env_id, controllers, scenarios, episodes, progress=lambda m: print(m, file=sys.stderr))
+    path = write_evaluation(env_id, results, out, command)
+    return path, results
+
+
+def _evaluate(args: argparse.Namespace) -> int:
+    from ssme_envs.evaluation import check_env_id, scenario_names
+
+    env_id = check_env_id(args.env)
+    if args.episodes < 1:
+        raise _UsageError(f"--episodes must be a positive integer, got {args.episodes}")
+    scenarios = None
+    if args.scenario is not None:
+        scenarios = list(_names(args.scenario, "--scenario"))
+        valid = scenario_names(env_id)
+        unknown = [s for s in scenarios if s not in valid]
+        if unknown:
+            raise _UsageError(
+                f"unknown scenario {', '.join(unknown)} for {env_id}; choose from {', '.join(valid)}"
+            )
+    controllers = _controllers(env_id, args.controllers)
+    _make_dir(args.out)
+    command = "ssme-envs " + " ".join(sys.argv[1:]) if sys.argv[1:2] == ["evaluate"] else "ssme-envs evaluate"
+    path, _ = _run_evaluation(env_id, controllers, scenarios, args.episodes, args.out, command)
+    print(f"wrote {path}, {args.out / 'results.json'} and the plots")
+    return 0
+
+
+def _report(args: argparse.Namespace) -> int:
+    from ssme_envs.main_report import REPORT_PLAN, write_main_report
+
+    if args.episodes < 1:
+        raise _UsageError(f"--episodes must be a positive integer, got {args.episodes}")
+    start = time.perf_counter()
+    _make_dir(args.out)
+    parser = build_parser()
+    print("identifying the engine (embedded experiment, five power levels) ...", file=sys.stderr)
+    _identify_engine(parser.parse_args(["identify", "engine", "--out", str(args.out / "engine")]))
+    print("identifying the nozzle (embedded bench test) ...", file=sys.stderr)
+    _identify_nozzle(parser.parse_args(["identify", "nozzle", "--out", str(args.out / "nozzle")]))
+    evaluations = {}
+    for env_id, (specs, scenarios) in REPORT_PLAN.items():
+        folder = args.out / env_id.split("/")[-1]
+        command = (
+            f"ssme-envs evaluate --env {env_id} --controllers {specs} --scenario {','.join(scenarios)} "
+            f"--episodes {args.episodes} --out {folder}"
+        )
+        print(f"evaluating on {env_id} ...", file=sys.stderr)
+        _, evaluations[env_id] = _run_evaluation(
+            env_id, _controllers(env_id, specs), scenarios, args.episodes, folder, command
+        )
+    path = write_main_report(args.out, evaluations, args.episodes, time.perf_counter() - start)
+    print(f"report: {path} ({time.perf_counter() - start:.0f} s)")
+    return 0
+
+
 def _validate_engine(args: argparse.Namespace) -> int:
     from ssme_envs.identification import pipeline, report
     from ssme_envs.identification.metrics import validate
@@ -322,6 +418,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _identify_nozzle(args)
         if args.command == "bench":
             return _bench(args)
+        if args.command == "evaluate":
+            return _evaluate(args)
+        if args.command == "report":
+            return _report(args)
         if args.command == "validate" and args.plant == "engine":
             return _validate_engine(args)
     except (_UsageError, ValueError) as exc:

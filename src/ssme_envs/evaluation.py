@@ -210,12 +210,15 @@ def metrics(run: Rollout, layout: Layout) -> dict[str, Any]:
     change = np.diff(run.actions, axis=0, prepend=0.0)
     moving = np.abs(change) > 1e-3
     for j, name in enumerate(layout.actuators):
-        signs = np.sign(change[:, :, j]) * moving[:, :, j]
-        reversals = ((signs[1:] * signs[:-1]) < 0) & alive[1:]
+        # a reversal: a move against the previous move, holds in between not counted
+        reversals = [
+            np.count_nonzero(np.diff(np.sign(change[moving[:, i, j] & alive[:, i], i, j])))
+            for i in range(alive.shape[1])
+        ]
         out["actuators"][name] = {
             "effort_rms": float(np.sqrt((run.actions[:, :, j] ** 2 * alive).sum() / alive.sum())),
             "travel": float((np.abs(change[:, :, j]) * alive).sum(axis=0).mean()),
-            "reversals": float(reversals.sum(axis=0).mean()),
+            "reversals": float(np.mean(reversals)),
             "saturated_steps": float(((np.abs(run.requested[:, :, j]) > 1.0) & alive).sum(axis=0).mean()),
         }
     return out

@@ -1,0 +1,143 @@
+"""The main job's report.md: identification of both plants, then the controller comparisons."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+from typing import Any
+
+TRACKING = "ssme_envs/EngineTracking-v0"
+THROTTLE = "ssme_envs/EngineThrottle-v0"
+NOZZLE = "ssme_envs/NozzleTVC-v0"
+LAUNCHER = "ssme_envs/LauncherPitch-v0"
+
+# env -> (controllers, scenarios) that `ssme-envs report` evaluates
+REPORT_PLAN: dict[str, tuple[str, list[str]]] = {
+    TRACKING: (
+        "zero,pi,lqi,mpc,pi:truth,lqi:truth,mpc:truth",
+        ["nominal", "valves", "noise", "pc_step", "mr_step", "stuck_valve"],
+    ),
+    THROTTLE: ("zero,pi,scheduled,scheduled:truth", ["mission", "mission_linear"]),
+    NOZZLE: ("zero,pid,lqi,hysteresis", ["step", "sine_sweep", "attitude", "random_steps", "linear_plant"]),
+    LAUNCHER: ("zero,pid,lqi", ["step", "attitude", "random_steps", "linear_nozzle"]),
+}
+
+
+def _embedded(path: Path, folder: str) -> list[str]:
+    """A sub-report's lines, headings one level down and figure paths into its folder."""
+    text = path.read_text()
+    text = re.sub(r"!\[([^\]]*)\]\((?!http)([^)]+)\)", lambda m: f"![{m[1]}]({folder}/{m[2]})", text)
+    return [("#" + line if line.startswith("#") else line) for line in text.splitlines()]
+
+
+def _cost(results: dict, scenario: str, controller: str) -> float:
+    return results[scenario][controller]["cost_mean"]
+
+
+def _reversals(results: dict, scenario: str, controller: str) -> str:
+    acts = results[scenario][controller]["actuators"]
+    return " / ".join(f"{a['reversals']:.1f}" for a in acts.values())
+
+
+def engine_tables(results: dict) -> list[str]:
+    """LQI against PI on the linear plant, and what the valves (backlash, stiction) cost each."""
+    lines = [
+        "### EngineTracking: LQI against decoupled PI, and what the valves cost",
+        "",
+        "Episode cost (minus the return; lower is better) on random steps, noise off: `nominal` is the "
+        "published linear model (no lambda, backlash or stiction); `valves` adds lambda (asymmetric "
+        "gains), backlash and stiction. Reversals: changes of direction per episode, OPOV / FPOV (wear, "
+        "limit cycles).",
+        "",
+        "| controller | cost nominal | cost with valves | valves add | reversals nominal "
+        "| reversals with valves |",
+        "|---|---|---|---|---|---|",
+    ]
+    for name in ("pi", "lqi", "mpc"):
+        nominal, valves = _cost(results, "nominal", name), _cost(results, "valves", name)
+        lines.append(
+            f"| {name} | {nominal:.3f} | {valves:.3f} | {100 * (valves / nominal - 1):+.0f} % | "
+            f"{_reversals(results, 'nominal', name)} | {_reversals(results, 'valves', name)} |"
+        )
+    ratio = _cost(results, "nominal", "lqi") / _cost(results, "nominal", "pi")
+    lines += [
+        "",
+        f"On the nominal plant LQI's cost is {100 * ratio:.0f} % of decoupled PI's "
+        f"({100 * (1 - ratio):.0f} % lower).",
+        "",
+        "### Sim-to-real: designed on the identified model, evaluated on the truth",
+        "",
+        "Cost on the full truth (lambda, backlash, stiction, sensor noise; scenario `noise`) of each "
+        "design on the identified model and on the truth's own linear model.",
+        "",
+        "| controller | designed on identified | designed on truth | gap |",
+        "|---|---|---|---|",
+    ]
+    for name in ("pi", "lqi", "mpc"):
+        ident, truth = _cost(results, "noise", name), _cost(results, "noise", f"{name}:truth")
+        lines.append(f"| {name} | {ident:.3f} | {truth:.3f} | {100 * (ident / truth - 1):+.1f} % |")
+    return lines
+
+
+def nozzle_tables(results: dict) -> list[str]:
+    lines = [
+        "### NozzleTVC: hysteresis compensation",
+        "",
+        "Tracking IAE (deg s) on the Bouc-Wen joint of the LQ servo (`lqi`) alone and with the inverse "
+        "Bouc-Wen feedforward (`hysteresis`), and of the PID; the linear joint for reference.",
+        "",
+        "| scenario | pid | lqi | lqi + compensation | change |",
+        "|---|---|---|---|---|",
+    ]
+    for scenario in results:
+        if scenario.startswith("_"):
+            continue
+        iae = {c: results[scenario][c]["outputs"]["angle"]["iae"] for c in ("pid", "lqi", "hysteresis")}
+        lines.append(
+            f"| {scenario} | {iae['pid']:.4f} | {iae['lqi']:.4f} | {iae['hysteresis']:.4f} | "
+            f"{100 * (iae['hysteresis'] / iae['lqi'] - 1):+.1f} % |"
+        )
+    return lines
+
+
+def write_main_report(
+    out: Path, evaluations: dict[str, dict[str, Any]], episodes: int, seconds: float
+) -> Path:
+    """report.md under ``out`` from the identification reports in out/engine and out/nozzle and
+    the evaluations (``{env_id: evaluate() results}``, written to out/<env name>/)."""
+    lines = [
+        "# ssme-envs: identification and controller comparison",
+        "",
+        f"Command: `ssme-envs report --out {out} --episodes {episodes}` ({seconds:.0f} s). Every number "
+        "below comes from a seeded run and is reproduced bit for bit by the same command.",
+        "",
+        "## Controllers",
+        "",
+        f"Each controller is designed on the identified model (`name:truth`: on the truth's linear model) "
+        f"and evaluated on the truth, {episodes} episodes per scenario, the same seeds for every controller.",
+        "",
+    ]
+    if TRACKING in evaluations:
+        lines += [*engine_tables(evaluations[TRACKING]), ""]
+    if NOZZLE in evaluations:
+        lines += [*nozzle_tables(evaluations[NOZZLE]), ""]
+    lines += ["### Every scenario", ""]
+    for env_id, results in evaluations.items():
+        folder = env_id.split("/")[-1]
+        scenarios = [s for s in results if not s.startswith("_")]
+        lines += [f"#### {env_id}", "", f"Tables and plots: [{folder}/results.md]({folder}/results.md).", ""]
+        lines += [f"![{scenarios[0]}]({folder}/{scenarios[0]}.png)", ""]
+        for scenario in scenarios:
+            costs = ", ".join(f"{c} {m['cost_mean']:.3f}" for c, m in results[scenario].items())
+            lines.append(f"- {scenario}: cost {costs}")
+        lines.append("")
+    lines += ["## Identification", ""]
+    for folder in ("engine", "nozzle"):
+        if (out / folder / "report.md").exists():
+            lines += [*_embedded(out / folder / "report.md", folder), ""]
+    path = out / "report.md"
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+__all__ = ["REPORT_PLAN", "engine_tables", "nozzle_tables", "write_main_report"]

@@ -1,0 +1,122 @@
+"""Evaluation results as files: results.json, a markdown table per scenario, response plots."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ssme_envs.evaluation import LAYOUTS, Rollout
+
+
+def _clean(value: Any) -> Any:
+    """JSON-ready: NaN and inf become null, numpy scalars plain numbers."""
+    if isinstance(value, dict):
+        return {str(k): _clean(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_clean(v) for v in value]
+    if isinstance(value, float | np.floating):
+        return float(value) if math.isfinite(value) else None
+    if isinstance(value, np.integer):
+        return int(value)
+    return value
+
+
+def _fmt(value: float | None, digits: int = 3) -> str:
+    if value is None or not math.isfinite(value):
+        return "-"
+    return f"{value:.{digits}g}" if abs(value) < 1e4 else f"{value:.3e}"
+
+
+def scenario_table(env_id: str, scenario: str, rows: dict[str, dict]) -> str:
+    """A markdown table of every controller's metrics on one scenario."""
+    layout = LAYOUTS[env_id]
+    head = ["controller", "return", "cost CVaR90", "ends"]
+    for out in layout.outputs:
+        head += [f"{out} IAE", f"{out} ITAE", f"{out} overshoot %", f"{out} settling s", f"{out} ss err"]
+    for act in layout.actuators:
+        head += [f"{act} reversals", f"{act} saturated"]
+    lines = [f"**{scenario}** (errors in {layout.unit}, times in s)", "", "| " + " | ".join(head) + " |"]
+    lines.append("|" + "---|" * len(head))
+    for name, m in rows.items():
+        cells = [
+            name,
+            f"{m['return_mean']:.3f} ± {m['return_std']:.3f}",
+            _fmt(m["cost_cvar90"]),
+            str(m["terminations"]),
+        ]
+        for out in layout.outputs:
+            o = m["outputs"][out]
+            cells += [_fmt(o["iae"]), _fmt(o["itae"]), _fmt(o["overshoot"]), _fmt(o["settling_time"]),
+                      _fmt(o["steady_state_error"])]  # fmt: skip
+        for act in layout.actuators:
+            a = m["actuators"][act]
+            cells += [_fmt(a["reversals"]), _fmt(a["saturated_steps"])]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def plot_scenario(env_id: str, scenario: str, runs: dict[str, Rollout], path: Path) -> None:
+    """Responses of the first episode of every controller overlaid: one panel per output (and its
+    reference), one per actuator."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    layout = LAYOUTS[env_id]
+    panels = len(layout.outputs) + len(layout.actuators)
+    fig, axes = plt.subplots(panels, 1, figsize=(8, 2.2 * panels), sharex=True, squeeze=False)
+    for c, (name, run) in enumerate(runs.items()):
+        steps = int(run.alive[:, 0].sum())
+        t = np.arange(steps + 1) * run.dt
+        color = f"C{c}"
+        for i, out in enumerate(layout.outputs):
+            ax = axes[i, 0]
+            if c == 0:
+                ax.plot(
+                    t, run.obs[: steps + 1, 0, layout.reference_columns[i]], "k--", lw=1, label="reference"
+                )
+            ax.plot(t, run.obs[: steps + 1, 0, layout.output_columns[i]], color=color, lw=1, label=name)
+            ax.set_ylabel(f"{out} ({layout.unit})")
+        for j, act in enumerate(layout.actuators):
+            ax = axes[len(layout.outputs) + j, 0]
+            ax.step(t[1:], run.actions[:steps, 0, j], where="pre", color=color, lw=1)
+            ax.set_ylabel(f"{act} action")
+    axes[0, 0].legend(loc="best", fontsize=8, ncol=2)
+    axes[-1, 0].set_xlabel("time (s)")
+    fig.suptitle(f"{env_id}: {scenario} (first episode)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def write_evaluation(env_id: str, results: dict[str, Any], out: Path, command: str) -> Path:
+    """results.json, results.md and one PNG per scenario under ``out``; returns results.md."""
+    out.mkdir(parents=True, exist_ok=True)
+    scenarios = [k for k in results if not k.startswith("_")]
+    data = {"env": env_id, "command": command, "scenarios": {s: results[s] for s in scenarios}}
+    (out / "results.json").write_text(json.dumps(_clean(data), indent=1) + "\n")
+    lines = [f"# Evaluation on {env_id}", "", f"Command: `{command}`", ""]
+    lines += [
+        "Return: mean ± std over the episodes (higher is better); cost CVaR90: mean cost of the worst 10 %; "
+        "ends: episodes terminated early. IAE, ITAE over the episode; overshoot and settling time (2 %) on "
+        "single-step references; ss err: mean |error| over the last 10 % of the episode; reversals: "
+        "changes of direction of each actuator per episode (wear); saturated: steps whose requested action "
+        "was beyond [-1, 1].",
+        "",
+    ]
+    for scenario in scenarios:
+        figure = f"{scenario}.png"
+        runs = {name: results["_rollouts"][(scenario, name)] for name in results[scenario]}
+        plot_scenario(env_id, scenario, runs, out / figure)
+        lines += [scenario_table(env_id, scenario, results[scenario]), "", f"![{scenario}]({figure})", ""]
+    path = out / "results.md"
+    path.write_text("\n".join(lines))
+    return path
+
+
+__all__ = ["plot_scenario", "scenario_table", "write_evaluation"]

@@ -1,0 +1,115 @@
+"""Evaluation harness: metrics against python-control and hand computations, the CLI's files and
+errors."""
+
+import json
+
+import control
+import numpy as np
+import pytest
+import scipy.signal
+
+from ssme_envs.cli import main
+from ssme_envs.evaluation import LAYOUTS, Rollout, evaluate, metrics, step_metrics
+
+TRACKING = "ssme_envs/EngineTracking-v0"
+
+
+@pytest.mark.parametrize(
+    "system",
+    [
+        ([1.0], [1.0, 0.6, 1.0]),  # underdamped: overshoot, ringing
+        ([2.0], [0.5, 1.0]),  # first order
+        ([1.0, 3.0], [1.0, 2.0, 3.0]),  # with a zero
+    ],
+)
+def test_step_metrics_agree_with_python_control_step_info(system):
+    t = np.linspace(0.0, 30.0, 3001)
+    _, y = scipy.signal.step(system, T=t)
+    ours = step_metrics(t, y)
+    theirs = control.step_info(y, t)
+    assert ours["rise_time"] == pytest.approx(theirs["RiseTime"], abs=1e-12)
+    assert ours["settling_time"] == pytest.approx(theirs["SettlingTime"], abs=1e-12)
+    assert ours["overshoot"] == pytest.approx(theirs["Overshoot"], abs=1e-9)
+
+
+def test_metrics_by_hand():
+    # 2 episodes x 10 steps of 0.1 s: constant error 0.5 %; episode 2 ends after 5 steps
+    steps, dt = 10, 0.1
+    obs = np.zeros((steps + 1, 2, 10))
+    obs[:, :, 4] = 0.5
+    actions = np.zeros((steps, 2, 2))
+    actions[:, 0, 0] = [0, 1, 0, 1, 1, 1, 0, 0, 0, 0]  # 3 reversals: up, down, up, ..., down
+    requested = actions.copy()
+    requested[2, 0, 1] = 1.5
+    alive = np.ones((steps, 2), dtype=bool)
+    alive[5:, 1] = False
+    rewards = np.full((steps, 2), -1.0)
+    m = metrics(Rollout(obs, requested, actions, rewards, alive, dt), LAYOUTS[TRACKING])
+    assert m["return_mean"] == pytest.approx(-7.5) and m["terminations"] == 1
+    assert m["cost_cvar90"] == pytest.approx(10.0)  # the worst of two episodes
+    pc = m["outputs"]["Pc"]
+    assert pc["iae"] == pytest.approx((0.5 * 10 * dt + 0.5 * 5 * dt) / 2)
+    assert pc["ise"] == pytest.approx((0.25 * 10 * dt + 0.25 * 5 * dt) / 2)
+    times = np.arange(1, 11) * dt
+    assert pc["itae"] == pytest.approx((0.5 * dt * times.sum() + 0.5 * dt * times[:5].sum()) / 2)
+    assert m["actuators"]["OPOV"]["reversals"] == pytest.approx(3 / 2)
+    assert m["actuators"]["FPOV"]["saturated_steps"] == pytest.approx(1 / 2)
+
+
+def test_a_nan_controller_is_named_with_its_step():
+    class Broken:
+        def reset(self, seed=None, num_envs=1, envs=None):
+            self.k = 0
+
+        def act(self, obs, info=None):
+            self.k += 1
+            out = np.zeros((len(obs), 2))
+            if self.k > 7:
+                out[1, 0] = np.nan
+            return out
+
+    with pytest.raises(ValueError, match="controller 'broken' returned a non-finite action .* at step 7"):
+        evaluate(TRACKING, {"broken": lambda env: Broken()}, ["nominal"], episodes=2)
+
+
+def test_evaluate_command_writes_results_and_plots(tmp_path, capsys):
+    out = tmp_path / "ev"
+    code = main(["evaluate", "--env", TRACKING, "--controllers", "pi,lqi,lqi:truth", "--scenario",
+                 "pc_step,nominal", "--episodes", "3", "--out", str(out)])  # fmt: skip
+    assert code == 0
+    data = json.loads((out / "results.json").read_text())
+    lqi = data["scenarios"]["pc_step"]["lqi"]
+    assert {"return_mean", "return_std", "cost_cvar90", "outputs", "actuators"} <= set(lqi)
+    assert lqi["outputs"]["Pc"]["rise_time"] > 0 and lqi["outputs"]["Pc"]["iae"] > 0
+    assert (out / "pc_step.png").stat().st_size > 10_000 and (out / "nominal.png").exists()
+    assert "| lqi:truth |" in (out / "results.md").read_text()
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--env", "CartPole-v1"], "unknown env 'CartPole-v1'; choose one of ssme_envs/EngineTracking-v0"),
+        (["--env", TRACKING, "--controllers", "pi,lqr"], "unknown controller 'lqr'"),
+        (["--env", TRACKING, "--scenario", "storm"], "unknown scenario storm .*choose from pc_step"),
+        (["--env", TRACKING, "--episodes", "0"], "--episodes must be a positive integer"),
+        (["--env", TRACKING, "--controllers", "lqi:paper"], "unknown design model 'paper'"),
+    ],
+)
+def test_evaluate_command_rejects_bad_names(args, message, tmp_path, capsys):
+    assert main(["evaluate", *args, "--out", str(tmp_path / "x")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("error: ") and "\n" not in err
+    assert __import__("re").search(message, err), err
+
+
+def test_report_command_writes_one_report(tmp_path, capsys):
+    out = tmp_path / "report"
+    assert main(["report", "--out", str(out), "--episodes", "2"]) == 0
+    text = (out / "report.md").read_text()
+    for heading in ("LQI against decoupled PI", "Sim-to-real", "hysteresis compensation", "Table I"):
+        assert heading in text
+    for env in ("EngineTracking-v0", "EngineThrottle-v0", "NozzleTVC-v0", "LauncherPitch-v0"):
+        assert (out / env / "results.json").exists()
+    # every figure the report shows exists
+    for figure in __import__("re").findall(r"!\[[^\]]*\]\(([^)]+)\)", text):
+        assert (out / figure).exists(), figure
