@@ -37,7 +37,8 @@ def test_lqi_gain_is_python_controls_dlqr_on_the_augmented_model():
 def test_placed_pid_puts_the_closed_loop_poles_where_asked():
     a1, a0, g = 18.0, 6000.0, 0.04
     kp, ki, kd = placed_pid(a1, a0, g, omega=60.0, damping=0.7)
-    # x'' + a1 x' + a0 x = g (kp e + ki int e - kd x'), e = r - x: s^3 + (a1 + g kd) s^2 + (a0 + g kp) s + g ki
+    # x'' + a1 x' + a0 x = g (kp e + ki int e - kd x'), e = r - x:
+    # s^3 + (a1 + g kd) s^2 + (a0 + g kp) s + g ki
     poles = np.sort_complex(np.roots([1.0, a1 + g * kd, a0 + g * kp, g * ki]))
     expected = np.sort_complex(np.roots(np.polymul([1.0, 60.0], [1.0, 2 * 0.7 * 60.0, 3600.0])))
     np.testing.assert_allclose(poles, expected, rtol=1e-9)

@@ -68,7 +68,7 @@ def test_a_nan_controller_is_named_with_its_step():
                 out[1, 0] = np.nan
             return out
 
-    with pytest.raises(ValueError, match="controller 'broken' returned a non-finite action .* at step 7"):
+    with pytest.raises(ValueError, match=r"controller 'broken' returned a non-finite action .* at step 7"):
         evaluate(TRACKING, {"broken": lambda env: Broken()}, ["nominal"], episodes=2)
 
 
