@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from agents.base import BatchController, Controller, task_of
+from agents.base import BatchController, Controller, env_id_of, task_of
 from agents.lqi import LQIServo, ScheduledLQI
 from agents.mpc import MPC
 from agents.pid import DecoupledPI, PlacedPID
@@ -42,31 +42,53 @@ def _compensated(env: Any, design: str) -> HysteresisCompensated:
     return HysteresisCompensated(env, LQIServo(env, design), design)
 
 
-# name -> (factory(env, design), the env ids it serves)
-CONTROLLERS: dict[str, tuple[Callable[[Any, str], Controller], tuple[str, ...]]] = {
-    "zero": (ZeroAction, (TRACKING, THROTTLE, NOZZLE, LAUNCHER)),
-    "pi": (DecoupledPI, (TRACKING, THROTTLE)),
-    "lqi": (LQIServo, (TRACKING, NOZZLE, LAUNCHER)),
-    "mpc": (MPC, (TRACKING,)),
-    "scheduled": (ScheduledLQI, (THROTTLE,)),
-    "pid": (PlacedPID, (NOZZLE, LAUNCHER)),
-    "hysteresis": (_compensated, (NOZZLE,)),
+def _lq_tracker(env: Any, design: str) -> LQIServo:
+    """The reward's LQ-optimal tracker: the LQ servo with a negligible integral weight (1e-5 of the
+    errors'), reference feedforward only. On the true linear plant (``lq:truth``) it is the
+    physical limit a learned policy is measured against; on a mismatched model it leaves
+    steady-state error (what the integral weight of ``lqi`` buys back)."""
+    servo = LQIServo(env, design, integral_ratio=1e-5)
+    servo.name = "lq"
+    return servo
+
+
+def _shipped_ppo(env: Any, design: str) -> Controller:
+    """The PPO policy shipped for the env, trained on its full truth (``design="truth"``) or, for
+    EngineTracking, on the identified model (``"identified"``)."""
+    from agents.sb3 import PolicyController, shipped_policy
+
+    return PolicyController(shipped_policy(env_id_of(env), design))
+
+
+# name -> (factory(env, design), the env ids it serves, the design model when none is named)
+CONTROLLERS: dict[str, tuple[Callable[[Any, str], Controller], tuple[str, ...], str]] = {
+    "zero": (ZeroAction, (TRACKING, THROTTLE, NOZZLE, LAUNCHER), "identified"),
+    "pi": (DecoupledPI, (TRACKING, THROTTLE), "identified"),
+    "lqi": (LQIServo, (TRACKING, NOZZLE, LAUNCHER), "identified"),
+    "mpc": (MPC, (TRACKING,), "identified"),
+    "scheduled": (ScheduledLQI, (THROTTLE,), "identified"),
+    "pid": (PlacedPID, (NOZZLE, LAUNCHER), "identified"),
+    "hysteresis": (_compensated, (NOZZLE,), "identified"),
+    "lq": (_lq_tracker, (TRACKING,), "identified"),
+    # learned on the truth by default: a policy is trained on an env, not designed on a model
+    "ppo": (_shipped_ppo, (TRACKING, THROTTLE, NOZZLE), "truth"),
 }
 
 
 def controller_names(env_id: str) -> list[str]:
     """The controllers that serve an env, each also as ``name:truth``."""
-    return [name for name, (_, envs) in CONTROLLERS.items() if env_id in envs]
+    return [name for name, (_, envs, _) in CONTROLLERS.items() if env_id in envs]
 
 
 def parse_controller(spec: str, env_id: str) -> Callable[[Any], Controller]:
     """A factory ``env -> controller`` from ``name`` or ``name:design`` (design: identified,
-    truth); ValueError naming the valid choices otherwise."""
+    truth; for ``ppo`` the plant the policy was trained on); ValueError naming the valid choices
+    otherwise."""
     name, _, design = spec.partition(":")
     valid = controller_names(env_id)
     if name not in valid:
         raise ValueError(f"unknown controller {spec!r} for {env_id}; choose from {', '.join(valid)}")
-    design = design or "identified"
+    design = design or CONTROLLERS[name][2]
     if design not in DESIGN_SOURCES:
         raise ValueError(
             f"unknown design model {design!r} in {spec!r}; choose from {', '.join(DESIGN_SOURCES)}"
@@ -76,11 +98,8 @@ def parse_controller(spec: str, env_id: str) -> Callable[[Any], Controller]:
 
 
 def make_controller(spec: str, env: Any, env_id: str | None = None) -> Controller:
-    """The controller ``spec`` (``"lqi"``, ``"pi:truth"``, ...) designed for ``env``."""
-    if env_id is None:
-        spec_obj = getattr(getattr(env, "unwrapped", env), "spec", None)
-        env_id = getattr(spec_obj, "id", None) or TRACKING
-    return parse_controller(spec, env_id)(env)
+    """The controller ``spec`` (``"lqi"``, ``"pi:truth"``, ``"ppo"``, ...) designed for ``env``."""
+    return parse_controller(spec, env_id or env_id_of(env))(env)
 
 
 __all__ = [

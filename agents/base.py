@@ -36,6 +36,23 @@ def task_of(env: Any) -> Any:
     raise TypeError(f"{type(env).__name__} is not an ssme-envs environment (it has no task)")
 
 
+def env_id_of(env: Any) -> str:
+    """The registered id of an ssme-envs env, from the kind of its task."""
+    from ssme_envs.envs.engine_throttle import ThrottleTask
+    from ssme_envs.envs.launcher_pitch import LauncherTask
+    from ssme_envs.envs.nozzle_tvc import NozzleTask
+
+    task = task_of(env)
+    for kind, name in (
+        (ThrottleTask, "EngineThrottle"),
+        (LauncherTask, "LauncherPitch"),
+        (NozzleTask, "NozzleTVC"),
+    ):
+        if isinstance(task, kind):
+            return f"ssme_envs/{name}-v0"
+    return "ssme_envs/EngineTracking-v0"
+
+
 @dataclass(frozen=True)
 class Ports:
     """How a controller designed on a plant model reads and writes an env: the plant output y
@@ -98,4 +115,4 @@ class BatchController:
         raise NotImplementedError
 
 
-__all__ = ["DEG", "BatchController", "Controller", "Ports", "task_of"]
+__all__ = ["DEG", "BatchController", "Controller", "Ports", "env_id_of", "task_of"]

@@ -14,6 +14,7 @@ with code 2.
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import sys
 import time
 from collections.abc import Sequence
@@ -135,6 +136,17 @@ def build_parser() -> argparse.ArgumentParser:
         "--seed", type=int, default=0, help="seed of the first episode (default: %(default)s)"
     )
     evaluate.add_argument("--out", type=Path, required=True, help="output directory")
+
+    train = commands.add_parser(
+        "train", help="train a stable-baselines3 agent on an env (model.zip, normalization, config)"
+    )
+    train.add_argument("--env", help="env id (or 'env' in the config)")
+    train.add_argument("--algo", help="ppo, sac or td3 (or 'algo' in the config)")
+    train.add_argument("--steps", type=int, help="environment steps (default: the config's, else 200000)")
+    train.add_argument("--seed", type=int, help="seed (default: the config's, else 0)")
+    train.add_argument("--config", type=Path, help="TOML config (hyperparameters, env options, ...)")
+    train.add_argument("--tensorboard", action="store_true", help="write TensorBoard logs under --out")
+    train.add_argument("--out", type=Path, required=True, help="output directory")
 
     report = commands.add_parser(
         "report",
@@ -353,6 +365,28 @@ def _evaluate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _train(args: argparse.Namespace) -> int:
+    from agents.sb3 import check_config, load_config, train
+    from ssme_envs.evaluation import check_env_id
+
+    config = load_config(args.config) if args.config is not None else {}
+    overrides = {"env": args.env, "algo": args.algo, "steps": args.steps, "seed": args.seed}
+    config.update({k: v for k, v in overrides.items() if v is not None})
+    if args.tensorboard:
+        config["tensorboard"] = True
+    config = check_config(config, str(args.config or "options"))
+    check_env_id(config["env"])
+    _make_dir(args.out)
+    summary = train(config, args.out)
+    print(
+        f"trained {summary['algo']} on {summary['env']}: {summary['steps']:,} steps in "
+        f"{summary['seconds']:.0f} s ({summary['steps_per_s']:,.0f} steps/s), best evaluation return "
+        f"{summary['best_return']:.3f}; "
+        f"wrote {args.out / 'model.zip'}"
+    )
+    return 0
+
+
 def _report(args: argparse.Namespace) -> int:
     from ssme_envs.main_report import REPORT_PLAN, write_main_report
 
@@ -366,7 +400,13 @@ def _report(args: argparse.Namespace) -> int:
     print("identifying the nozzle (embedded bench test) ...", file=sys.stderr)
     _identify_nozzle(parser.parse_args(["identify", "nozzle", "--out", str(args.out / "nozzle")]))
     evaluations = {}
+    learned = importlib.util.find_spec("stable_baselines3") is not None
+    if not learned:
+        print("stable-baselines3 is not installed: the report leaves out the PPO policies "
+              '(pip install ".[rl]")', file=sys.stderr)  # fmt: skip
     for env_id, (specs, scenarios) in REPORT_PLAN.items():
+        if not learned:
+            specs = ",".join(s for s in specs.split(",") if not s.startswith("ppo"))
         folder = args.out / env_id.split("/")[-1]
         command = (
             f"ssme-envs evaluate --env {env_id} --controllers {specs} --scenario {','.join(scenarios)} "
@@ -422,6 +462,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _evaluate(args)
         if args.command == "report":
             return _report(args)
+        if args.command == "train":
+            return _train(args)
         if args.command == "validate" and args.plant == "engine":
             return _validate_engine(args)
     except (_UsageError, ValueError) as exc:

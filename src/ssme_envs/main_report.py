@@ -14,11 +14,14 @@ LAUNCHER = "ssme_envs/LauncherPitch-v0"
 # env -> (controllers, scenarios) that `ssme-envs report` evaluates
 REPORT_PLAN: dict[str, tuple[str, list[str]]] = {
     TRACKING: (
-        "zero,pi,lqi,mpc,pi:truth,lqi:truth,mpc:truth",
+        "zero,pi,lqi,mpc,ppo,pi:truth,lqi:truth,mpc:truth,lq:truth,ppo:identified",
         ["nominal", "valves", "noise", "pc_step", "mr_step", "stuck_valve"],
     ),
-    THROTTLE: ("zero,pi,scheduled,scheduled:truth", ["mission", "mission_linear"]),
-    NOZZLE: ("zero,pid,lqi,hysteresis", ["step", "sine_sweep", "attitude", "random_steps", "linear_plant"]),
+    THROTTLE: ("zero,pi,scheduled,scheduled:truth,ppo", ["mission", "mission_linear"]),
+    NOZZLE: (
+        "zero,pid,lqi,hysteresis,ppo",
+        ["step", "sine_sweep", "attitude", "random_steps", "linear_plant"],
+    ),
     LAUNCHER: ("zero,pid,lqi", ["step", "attitude", "random_steps", "linear_nozzle"]),
 }
 
@@ -53,7 +56,7 @@ def engine_tables(results: dict) -> list[str]:
         "| reversals with valves |",
         "|---|---|---|---|---|---|",
     ]
-    for name in ("pi", "lqi", "mpc"):
+    for name in [c for c in ("pi", "lqi", "mpc", "ppo") if c in results["nominal"]]:
         nominal, valves = _cost(results, "nominal", name), _cost(results, "valves", name)
         lines.append(
             f"| {name} | {nominal:.3f} | {valves:.3f} | {100 * (valves / nominal - 1):+.0f} % | "
@@ -73,9 +76,44 @@ def engine_tables(results: dict) -> list[str]:
         "| controller | designed on identified | designed on truth | gap |",
         "|---|---|---|---|",
     ]
-    for name in ("pi", "lqi", "mpc"):
-        ident, truth = _cost(results, "noise", name), _cost(results, "noise", f"{name}:truth")
-        lines.append(f"| {name} | {ident:.3f} | {truth:.3f} | {100 * (ident / truth - 1):+.1f} % |")
+    for name in ("pi", "lqi", "mpc", "ppo"):
+        # a classical design names its truth variant, the learned policy its identified one
+        pair = (name, f"{name}:truth") if name != "ppo" else ("ppo:identified", "ppo")
+        if all(p in results["noise"] for p in pair):
+            ident, truth = _cost(results, "noise", pair[0]), _cost(results, "noise", pair[1])
+            lines.append(f"| {name} | {ident:.3f} | {truth:.3f} | {100 * (ident / truth - 1):+.1f} % |")
+    if "ppo" in results["noise"]:
+        lines += [
+            "",
+            "PPO: the shipped policy trained on the full truth (`ppo`) and the one trained on the "
+            "identified linear model (`ppo:identified`), both evaluated on the truth. In the first table "
+            "`ppo` is the truth-trained policy on plants it was not trained on.",
+            "",
+            *rl_table(results),
+        ]
+    return lines
+
+
+def rl_table(results: dict) -> list[str]:
+    """Learned against classical on the nominal plant, with the valves, and on the full truth."""
+    scenarios = ("nominal", "valves", "noise")
+    limit = "lq:truth" if "lq:truth" in results["nominal"] else None
+    lines = [
+        "### RL against the classical designs",
+        "",
+        "Episode cost on the nominal linear plant, with the valves (lambda, backlash, stiction) and on "
+        "the full truth (plus sensor noise). `lq:truth` is the reward's LQ-optimal tracker designed on "
+        "the true linear model (reference feedforward, negligible integral action): the physical limit "
+        "on the nominal plant.",
+        "",
+        "| controller | nominal | with valves | full truth |" + (f" nominal / {limit} |" if limit else ""),
+        "|---|---|---|---|" + ("---|" if limit else ""),
+    ]
+    names = ("pi", "lqi", "mpc", "lqi:truth", "lq:truth", "ppo", "ppo:identified")
+    for name in [n for n in names if all(n in results[s] for s in scenarios)]:
+        costs = " | ".join(f"{_cost(results, s, name):.3f}" for s in scenarios)
+        ratio = _cost(results, "nominal", name) / _cost(results, "nominal", limit) if limit else None
+        lines.append(f"| {name} | {costs} |" + (f" {ratio:.2f} |" if limit else ""))
     return lines
 
 
@@ -140,4 +178,4 @@ def write_main_report(
     return path
 
 
-__all__ = ["REPORT_PLAN", "engine_tables", "nozzle_tables", "write_main_report"]
+__all__ = ["REPORT_PLAN", "engine_tables", "nozzle_tables", "rl_table", "write_main_report"]

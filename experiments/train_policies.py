@@ -1,0 +1,109 @@
+"""Train the PPO policies of experiments/configs and ship three of them with the package.
+
+Each config trains on this machine's CPU through the SB3 adapter (VecNormalize, the best
+evaluation kept) into experiments/runs/<config>/; the EngineTracking, EngineThrottle and NozzleTVC
+policies trained on the full truth are copied into agents/policies/<env>/. Every run is then
+evaluated by the harness beside the LQ servo (or the scheduled one) on the plant it was trained
+for and on the full truth. The policy trained on EngineTracking's identified model is shipped too
+(the sim-to-real comparison). Writes experiments/results/rl_training.md.
+
+    python experiments/train_policies.py [--evaluate-only] [config names ...]
+
+--evaluate-only re-evaluates the runs already in experiments/runs/ without training.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import sys
+from pathlib import Path
+
+from agents import parse_controller
+from agents.sb3 import PolicyController, load_config, train
+from ssme_envs.evaluation import SCENARIOS, evaluate
+
+HERE = Path(__file__).resolve().parent
+SHIP = {
+    "ppo_engine_tracking": "EngineTracking-v0",
+    "ppo_engine_tracking_identified": "EngineTracking-v0-identified",
+    "ppo_engine_throttle": "EngineThrottle-v0",
+    "ppo_nozzle_tvc": "NozzleTVC-v0",
+}
+# the scenario of the plant each config trains on, and the full truth
+PLANT = {
+    "ppo_engine_tracking": "noise",
+    "ppo_engine_tracking_nominal": "nominal",
+    "ppo_engine_tracking_identified": "design_plant",
+    "ppo_engine_throttle": "mission",
+    "ppo_nozzle_tvc": "random_steps",
+}
+TRUTH = {"ssme_envs/EngineTracking-v0": "noise", "ssme_envs/EngineThrottle-v0": "mission",
+         "ssme_envs/NozzleTVC-v0": "random_steps"}  # fmt: skip
+# the LQ servo designed on the identified model (as users would), and a second reference: on
+# EngineTracking the reward's LQ-optimal tracker on the true linear model (the physical limit)
+BASELINES = {"ssme_envs/EngineTracking-v0": ("lqi", "lq:truth"),
+             "ssme_envs/EngineThrottle-v0": ("scheduled", "scheduled:truth"),
+             "ssme_envs/NozzleTVC-v0": ("lqi", "hysteresis")}  # fmt: skip
+
+
+def main(names: list[str], evaluate_only: bool = False) -> None:
+    header = [
+        "# PPO training and evaluation",
+        "",
+        "Command: `python experiments/train_policies.py`. Training on this machine's CPU (2 cores); cost = "
+        "minus the return, mean over 50 evaluation episodes (seed 0, the harness's), the baselines on the "
+        "same episodes: the LQ servo designed on the identified model (`lqi`, scheduled in power on "
+        "EngineThrottle), and `lq:truth`, the reward's LQ-optimal tracker on the true linear model (the "
+        "physical limit on the nominal plant), the scheduled servo on the truth's linear models, or the "
+        "LQ servo with the hysteresis compensation on NozzleTVC.",
+        "",
+        "| config | env | steps | wall-clock s | steps/s | scenario | PPO cost | baseline cost (PPO / it) "
+        "| second baseline |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    rows = []
+    for name in names:
+        config = load_config(HERE / "configs" / f"{name}.toml")
+        out = HERE / "runs" / name
+        if evaluate_only:
+            summary = json.loads((out / "training.json").read_text())
+        else:
+            summary = train(config, out)
+        env_id = config["env"]
+        if name in SHIP and not evaluate_only:
+            target = HERE.parent / "agents" / "policies" / SHIP[name]
+            target.mkdir(parents=True, exist_ok=True)
+            for file in ("model.zip", "normalization.json", "config.toml", "training.json"):
+                shutil.copy(out / file, target / file)
+        baselines = BASELINES[env_id]
+        for scenario in dict.fromkeys([PLANT[name], TRUTH[env_id]]):
+            assert scenario in SCENARIOS[env_id]
+            factories = {"ppo": lambda env, out=out: PolicyController(out)}
+            factories |= {spec: parse_controller(spec, env_id) for spec in baselines}
+            results = evaluate(env_id, factories, [scenario], episodes=50)[scenario]
+            ppo = results["ppo"]["cost_mean"]
+            costs = {spec: results[spec]["cost_mean"] for spec in baselines}
+            compared = " | ".join(f"{spec} {cost:.3f} ({ppo / cost:.2f})" for spec, cost in costs.items())
+            rows.append(
+                f"| {name} | {env_id} | {summary['steps']:,} | {summary['seconds']:.0f} | "
+                f"{summary['steps_per_s']:,.0f} | {scenario} | {ppo:.3f} | {compared} |"
+            )
+            print(rows[-1], flush=True)
+    path = HERE / "results" / "rl_training.md"
+    if path.exists():  # keep the rows of the configs not rerun this time
+        old = [row for row in path.read_text().splitlines()[len(header) :] if row.startswith("| ")]
+        rows += [row for row in old if row.split("|")[1].strip() not in names]
+    rows.sort(key=lambda row: list(PLANT).index(row.split("|")[1].strip()))
+    path.write_text("\n".join(header + rows) + "\n")
+    print(f"wrote {path}")
+
+
+if __name__ == "__main__":
+    args = sys.argv[1:]
+    evaluate_only = "--evaluate-only" in args
+    names = [arg for arg in args if arg != "--evaluate-only"]
+    unknown = sorted(set(names) - set(PLANT))
+    if unknown:
+        sys.exit(f"error: unknown config {', '.join(unknown)}; valid: {', '.join(PLANT)}")
+    main(names or list(PLANT), evaluate_only)

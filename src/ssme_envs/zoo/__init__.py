@@ -1,0 +1,19 @@
+"""Hyperparameters for rl-zoo3, one module per algorithm.
+
+rl-zoo3 reads a module's ``hyperparams`` dict (keyed by env id) when given its import path::
+
+    pip install "ssme-envs[zoo]"
+    python -m rl_zoo3.train --algo ppo --env ssme_envs/EngineTracking-v0 \\
+        --gym-packages ssme_envs --conf-file ssme_envs.zoo.ppo
+
+The PPO entries are the settings of the shipped policies (experiments/configs), with the zoo's
+vectorization (scalar envs in a DummyVecEnv; ``ssme-envs train`` steps the native vector env and is
+several times faster). The SAC and TD3 entries are untuned starting points.
+"""
+
+ENV_IDS = (
+    "ssme_envs/EngineTracking-v0",
+    "ssme_envs/EngineThrottle-v0",
+    "ssme_envs/NozzleTVC-v0",
+    "ssme_envs/LauncherPitch-v0",
+)
