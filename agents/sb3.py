@@ -140,19 +140,25 @@ def train(config: dict[str, Any], out: Path, progress: bool = True) -> dict[str,
     env_id, seed, n = config["env"], config["seed"], config["num_envs"]
     options = config["env_options"]
     hyper = dict(config["hyperparameters"])
-    venv = VecNormalize(
-        VecMonitor(make_sb3_vec_env(env_id, n, seed, **options)), gamma=hyper.get("gamma", 0.99)
-    )
-    evaluation = VecNormalize(
-        VecMonitor(make_sb3_vec_env(env_id, config["eval_episodes"], seed + 100_000, **options)),
-        training=False,
-        norm_reward=False,
-    )
+    try:
+        venv = VecNormalize(
+            VecMonitor(make_sb3_vec_env(env_id, n, seed, **options)), gamma=hyper.get("gamma", 0.99)
+        )
+        evaluation = VecNormalize(
+            VecMonitor(make_sb3_vec_env(env_id, config["eval_episodes"], seed + 100_000, **options)),
+            training=False,
+            norm_reward=False,
+        )
+    except TypeError as exc:  # an option the env does not take
+        raise ValueError(f"env_options: {exc}") from None
     policy_kwargs = {"net_arch": config["policy"]["net_arch"]} if config["policy"] else None
-    model = algorithm(
-        "MlpPolicy", venv, seed=seed, device="cpu", verbose=0, policy_kwargs=policy_kwargs,
-        tensorboard_log=str(out / "tensorboard") if config["tensorboard"] else None, **hyper,
-    )  # fmt: skip
+    try:
+        model = algorithm(
+            "MlpPolicy", venv, seed=seed, device="cpu", verbose=0, policy_kwargs=policy_kwargs,
+            tensorboard_log=str(out / "tensorboard") if config["tensorboard"] else None, **hyper,
+        )  # fmt: skip
+    except (AssertionError, ValueError) as exc:  # SB3 checks hyperparameter values with asserts
+        raise ValueError(f"hyperparameters: {exc}") from None
     history: list[dict[str, float]] = []
 
     class SaveNormalization(BaseCallback):
@@ -251,6 +257,11 @@ class PolicyController(BatchController):
         self.name = config["algo"]
 
     def compute(self, obs: np.ndarray) -> np.ndarray:
+        if obs.shape[1] != len(self.mean):
+            raise ValueError(
+                f"{self.name}: the policy was trained on {self.env_id} ({len(self.mean)} observations), "
+                f"got {obs.shape[1]}"
+            )
         normalized = np.clip((obs - self.mean) * self.scale, -self.clip, self.clip).astype(np.float32)
         action, _ = self.model.predict(normalized, deterministic=True)
         return np.asarray(action, dtype=np.float64)

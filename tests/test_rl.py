@@ -35,7 +35,14 @@ def test_bad_configs_name_the_key(config, message):
 def test_train_command_rejects_bad_input(tmp_path, capsys):
     bad = tmp_path / "bad.toml"
     bad.write_text('env = "ssme_envs/EngineTracking-v0"\nalgo = "ppo"\n[hyperparameters]\nbatch = 64\n')
+    option = tmp_path / "option.toml"
+    nozzle = 'env = "ssme_envs/NozzleTVC-v0"\nalgo = "ppo"\nnum_envs = 2\n'
+    option.write_text(nozzle + "[env_options]\npowr = 90\n")
+    value = tmp_path / "value.toml"
+    value.write_text(nozzle + "[hyperparameters]\nn_steps = 0\n")
     cases = [
+        (["--config", str(option)], "env_options:"),
+        (["--config", str(value)], "hyperparameters: `n_steps * n_envs` must be greater than 1"),
         (["--env", TRACKING, "--algo", "a2c"], "unknown algo 'a2c'"),
         (["--env", "Pong-v5", "--algo", "ppo"], "unknown env 'Pong-v5'"),
         (["--config", str(bad)], "hyperparameters.batch is not a ppo hyperparameter"),
@@ -71,6 +78,8 @@ def test_each_algorithm_trains_saves_and_acts(algo, tmp_path):
     results = evaluate(TRACKING, {algo: lambda env: PolicyController(out)}, ["nominal"], episodes=2)
     assert np.isfinite(results["nominal"][algo]["cost_mean"])
     assert policy.act(np.zeros(10, dtype=np.float32)).shape == (2,)
+    with pytest.raises(ValueError, match=f"trained on {TRACKING} \\(10 observations\\), got 6"):
+        PolicyController(out).act(np.zeros(6))
 
 
 @pytest.mark.parametrize("name", SHIPPED)
