@@ -11,6 +11,15 @@ changes) plus a small integral weight that removes steady-state error on a misma
 Riccati equation) estimates x from the measured outputs; a reference feedforward moves the
 regulation target to ``(x_ss, u_ss)`` with ``A x_ss + B u_ss = x_ss``, ``C x_ss = r``. Integration
 stops while the input saturates (anti-windup).
+
+A moving reference is followed as a ramp: with ``s`` the reference's increment per sample, the
+target is the model's ramp-following motion (``x_k = x0 + k d``, ``u_k = u0 + k e`` with
+``(A - I) d + B e = 0``, ``C d = s``, ``(A - I) x0 + B u0 = d``, ``C x0 = r``) and the input
+changes by ``e`` per sample on top of the LQ law. ``s`` is the minmod of the last two increments
+of the reference (the smaller one when both have the same sign, else zero): a ramp or a sine
+shows two alike increments, a step one, so steps get no feedforward kick. Designs whose model
+leaves out dynamics the feedforward would drive (``LinearDesign.follow_ramps``) hold the static
+target only.
 """
 
 from __future__ import annotations
@@ -36,6 +45,8 @@ class ServoDesign:
     gain: np.ndarray  # (m, n + m + p): du = -gain @ (z - z_target)
     kalman: np.ndarray  # (n, p): x_hat = x_pred + kalman (y - C x_pred)
     target: np.ndarray  # (n + m, p): [x_ss; u_ss] = target @ r
+    ramp: np.ndarray  # (n + m, p): [x0; u0] = target @ r + ramp @ s on a ramp of s per sample
+    ramp_change: np.ndarray  # (m, p): e = ramp_change @ s (zeros for both without follow_ramps)
     cost_to_go: np.ndarray  # (n + m + p, n + m + p), the Riccati solution (MPC terminal cost)
     a_aug: np.ndarray
     b_aug: np.ndarray
@@ -86,7 +97,12 @@ def design_servo(
     kalman = cov @ c.T @ np.linalg.inv(c @ cov @ c.T + meas)
     square = np.block([[a - np.eye(n), b], [c, np.zeros((p, m))]])
     target = np.linalg.lstsq(square, np.vstack([np.zeros((n, p)), np.eye(p)]), rcond=None)[0]
-    return ServoDesign(a, b, c, gain, kalman, target, p_z, a_z, b_z, q_z, r)
+    # [d; e] = target @ s, then [x0; u0] solves square [x0; u0] = [d; r]
+    ramp = np.linalg.lstsq(square, np.vstack([target[:n], np.zeros((p, p))]), rcond=None)[0]
+    ramp_change = target[n:]
+    if not design.follow_ramps:
+        ramp, ramp_change = np.zeros_like(ramp), np.zeros_like(ramp_change)
+    return ServoDesign(a, b, c, gain, kalman, target, ramp, ramp_change, p_z, a_z, b_z, q_z, r)
 
 
 class LQIServo(BatchController):
@@ -109,17 +125,12 @@ class LQIServo(BatchController):
         self.servo = design_servo(self.design, integral_ratio, process_ratio)
 
     def initial_state(self, n: int) -> dict[str, np.ndarray]:
-        s = self.servo
-        return {
-            "x": np.zeros((n, s.A.shape[0])),
-            "u": np.zeros((n, s.B.shape[1])),
-            "q": np.zeros((n, s.C.shape[0])),
-        }
+        return servo_state(self.servo, n)
 
     def compute(self, obs: np.ndarray) -> np.ndarray:
         y, r = self.design.ports.read(obs)
         x = servo_estimate(self.servo, self.state, y)
-        du = servo_feedback(self.servo, self.state, x, r)
+        du = servo_feedback(self.servo, self.state, x, r, reference_step(self.state, r))
         return servo_advance(self.servo, self.state, x, y, r, du, self.design.input_limit) / (
             self.design.ports.input_scale
         )
@@ -133,21 +144,53 @@ def _apply(matrix: np.ndarray, v: np.ndarray) -> np.ndarray:
     return np.einsum("nij,nj->ni", matrix, v) if matrix.ndim == 3 else v @ matrix.T
 
 
+def servo_state(s: ServoDesign | Any, n: int) -> dict[str, np.ndarray]:
+    """The servo's state for n fresh episodes: estimate x, last input u, integrals q, and the last
+    reference and its last increment (NaN: none yet)."""
+    p = s.C.shape[0]
+    return {
+        "x": np.zeros((n, s.A.shape[-1])),
+        "u": np.zeros((n, s.B.shape[-1])),
+        "q": np.zeros((n, p)),
+        "r": np.full((n, p), np.nan),
+        "dr": np.zeros((n, p)),
+    }
+
+
+def reference_step(state: dict, r: np.ndarray) -> np.ndarray:
+    """The reference's increment per sample to feed forward (N, p): the minmod of its last two
+    increments. Advances the reference history; call once per sample."""
+    increment = np.where(np.isnan(state["r"]), 0.0, r - state["r"])
+    last = state["dr"]
+    state["r"], state["dr"] = r, increment
+    alike = increment * last > 0
+    return np.where(alike, np.sign(increment) * np.minimum(np.abs(increment), np.abs(last)), 0.0)
+
+
 def servo_estimate(s: ServoDesign | Any, state: dict, y: np.ndarray) -> np.ndarray:
     """The Kalman filter's estimate of x (N, n) given the measured outputs y (N, p)."""
     return state["x"] + _apply(s.kalman, y - _apply(s.C, state["x"]))
 
 
-def servo_deviation(s: ServoDesign | Any, state: dict, x: np.ndarray, r: np.ndarray) -> np.ndarray:
-    """z - z_target (N, n + m + p): the augmented state from the reference's steady state."""
+def servo_deviation(
+    s: ServoDesign | Any, state: dict, x: np.ndarray, r: np.ndarray, step: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """z - z_target (N, n + m + p), the augmented state from the motion that follows the
+    reference (at rest on r, or a ramp of ``step`` per sample), and that motion's input change e
+    (N, m)."""
     n, m = s.A.shape[-1], s.B.shape[-1]
-    goal = _apply(s.target, r)
-    return np.concatenate([x - goal[:, :n], state["u"] - goal[:, n : n + m], state["q"]], axis=1)
+    goal = _apply(s.target, r) + _apply(s.ramp, step)
+    change = _apply(s.ramp_change, step)
+    deviation = [x - goal[:, :n], state["u"] - (goal[:, n : n + m] - change), state["q"]]
+    return np.concatenate(deviation, axis=1), change
 
 
-def servo_feedback(s: ServoDesign | Any, state: dict, x: np.ndarray, r: np.ndarray) -> np.ndarray:
-    """The LQ input change du (N, m)."""
-    return -_apply(s.gain, servo_deviation(s, state, x, r))
+def servo_feedback(
+    s: ServoDesign | Any, state: dict, x: np.ndarray, r: np.ndarray, step: np.ndarray
+) -> np.ndarray:
+    """The input change du (N, m): the reference motion's change plus the LQ law."""
+    deviation, change = servo_deviation(s, state, x, r, step)
+    return change - _apply(s.gain, deviation)
 
 
 def servo_advance(
@@ -186,16 +229,11 @@ class ScheduledLQI(BatchController):
         servos = [design_servo(d, integral_ratio) for d in designs]
         self.tables = {
             key: np.stack([getattr(s, key) for s in servos])
-            for key in ("A", "B", "C", "gain", "kalman", "target")
+            for key in ("A", "B", "C", "gain", "kalman", "target", "ramp", "ramp_change")
         }
 
     def initial_state(self, n: int) -> dict[str, np.ndarray]:
-        a, b, c = self.tables["A"][0], self.tables["B"][0], self.tables["C"][0]
-        return {
-            "x": np.zeros((n, a.shape[0])),
-            "u": np.zeros((n, b.shape[1])),
-            "q": np.zeros((n, c.shape[0])),
-        }
+        return servo_state(SimpleNamespace(**{k: self.tables[k][0] for k in ("A", "B", "C")}), n)
 
     def scheduled(self, power: np.ndarray) -> Any:
         """The servo matrices at each env's power, (N, ...) each."""
@@ -208,7 +246,7 @@ class ScheduledLQI(BatchController):
         y, r = self.design.ports.read(obs)
         servo = self.scheduled(100.0 + obs[:, 2])
         x = servo_estimate(servo, self.state, y)
-        du = servo_feedback(servo, self.state, x, r)
+        du = servo_feedback(servo, self.state, x, r, reference_step(self.state, r))
         return servo_advance(servo, self.state, x, y, r, du, self.design.input_limit) / (
             self.design.ports.input_scale
         )
@@ -220,8 +258,10 @@ __all__ = [
     "ServoDesign",
     "augmented",
     "design_servo",
+    "reference_step",
     "servo_advance",
     "servo_deviation",
     "servo_estimate",
     "servo_feedback",
+    "servo_state",
 ]

@@ -17,7 +17,15 @@ import osqp
 import scipy.sparse as sparse
 
 from agents.base import BatchController
-from agents.lqi import design_servo, servo_advance, servo_deviation, servo_estimate, servo_feedback
+from agents.lqi import (
+    design_servo,
+    reference_step,
+    servo_advance,
+    servo_deviation,
+    servo_estimate,
+    servo_feedback,
+    servo_state,
+)
 from agents.plants import linear_design
 
 
@@ -73,14 +81,9 @@ class MPC(BatchController):
         self._solver: osqp.OSQP | None = None
 
     def initial_state(self, n: int) -> dict[str, np.ndarray]:
-        s = self.servo
         if self._solver is None or self._solver_envs != n:
             self._setup(n)
-        return {
-            "x": np.zeros((n, s.A.shape[0])),
-            "u": np.zeros((n, self.m)),
-            "q": np.zeros((n, s.C.shape[0])),
-        }
+        return servo_state(self.servo, n)
 
     def _setup(self, n: int) -> None:
         size = self.horizon * self.m
@@ -105,21 +108,25 @@ class MPC(BatchController):
         s, state, limit = self.servo, self.state, self.design.input_limit
         y, r = self.design.ports.read(obs)
         x = servo_estimate(s, state, y)
-        z = servo_deviation(s, state, x, r)
+        step = reference_step(state, r)
+        # the decision is the input change beyond the reference motion's (change per step)
+        z, change = servo_deviation(s, state, x, r, step)
         n, size = len(obs), self.horizon * self.m
-        u_prev = np.tile(state["u"], (1, self.horizon))  # (N, size)
-        lower = np.concatenate([-limit - u_prev, np.full((n, size), -self.max_change)], axis=1)
-        upper = np.concatenate([limit - u_prev, np.full((n, size), self.max_change)], axis=1)
+        ahead = np.arange(1, self.horizon + 1).repeat(self.m)  # steps of the motion by each input
+        u_motion = np.tile(state["u"], (1, self.horizon)) + ahead * np.tile(change, (1, self.horizon))
+        rate = np.tile(change, (1, self.horizon))
+        lower = np.concatenate([-limit - u_motion, -self.max_change - rate], axis=1)
+        upper = np.concatenate([limit - u_motion, self.max_change - rate], axis=1)
         self._solver.update(q=(z @ self.linear.T).ravel(), l=lower.ravel(), u=upper.ravel())
         result = self._solver.solve(raise_error=False)
         if result.info.status_val in (
             osqp.SolverStatus.OSQP_SOLVED,
             osqp.SolverStatus.OSQP_SOLVED_INACCURATE,
         ):
-            du = result.x.reshape(n, size)[:, : self.m]
+            du = change + result.x.reshape(n, size)[:, : self.m]
         else:  # an infeasible or failed QP: the unconstrained law, counted
             self.failures += 1
-            du = servo_feedback(s, state, x, r)
+            du = servo_feedback(s, state, x, r, step)
         return servo_advance(s, state, x, y, r, du, limit) / self.design.ports.input_scale
 
 

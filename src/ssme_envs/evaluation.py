@@ -43,7 +43,9 @@ SCENARIOS: dict[str, dict[str, dict[str, Any]]] = {
         "sine_sweep": {"reference": "sine_sweep"},
         "attitude": {"reference": "attitude"},
         "random_steps": {},
-        "linear_plant": {"plant": "linear"},
+        "linear_plant": {"plant": "linear"},  # Table 1's linear row: random steps, no hysteresis
+        "sine_sweep_linear": {"reference": "sine_sweep", "plant": "linear"},
+        "attitude_linear": {"reference": "attitude", "plant": "linear"},
         "gain_loss": {"fault": {"kind": "gain_loss", "time": 2.0, "magnitude": 0.5}},
     },
     "ssme_envs/LauncherPitch-v0": {
