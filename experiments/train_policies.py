@@ -30,13 +30,14 @@ SHIP = {
     "ppo_engine_throttle": "EngineThrottle-v0",
     "ppo_nozzle_tvc": "NozzleTVC-v0",
 }
-# the scenario of the plant each config trains on, and the full truth
+# the scenarios of the plant each config trains on (then the full truth's)
 PLANT = {
-    "ppo_engine_tracking": "noise",
-    "ppo_engine_tracking_nominal": "nominal",
-    "ppo_engine_tracking_identified": "design_plant",
-    "ppo_engine_throttle": "mission",
-    "ppo_nozzle_tvc": "random_steps",
+    "ppo_engine_tracking": ("noise",),
+    "ppo_engine_tracking_nominal": ("nominal",),
+    "ppo_engine_tracking_identified": ("design_plant",),
+    "ppo_engine_throttle": ("mission",),
+    "ppo_nozzle_tvc": ("random_steps", "step", "sine_sweep", "attitude"),
+    "ppo_nozzle_tvc_mixed": ("random_steps", "step", "sine_sweep", "attitude"),
 }
 TRUTH = {"ssme_envs/EngineTracking-v0": "noise", "ssme_envs/EngineThrottle-v0": "mission",
          "ssme_envs/NozzleTVC-v0": "random_steps"}  # fmt: skip
@@ -77,7 +78,7 @@ def main(names: list[str], evaluate_only: bool = False) -> None:
             for file in ("model.zip", "normalization.json", "config.toml", "training.json"):
                 shutil.copy(out / file, target / file)
         baselines = BASELINES[env_id]
-        for scenario in dict.fromkeys([PLANT[name], TRUTH[env_id]]):
+        for scenario in dict.fromkeys([*PLANT[name], TRUTH[env_id]]):
             assert scenario in SCENARIOS[env_id]
             factories = {"ppo": lambda env, out=out: PolicyController(out)}
             factories |= {spec: parse_controller(spec, env_id) for spec in baselines}

@@ -33,6 +33,7 @@ def test_checkers_pass_without_warnings(env_id):
                   "fault": {"kind": "gain_loss", "time": 1.0, "magnitude": 0.5}}),
         (NOZZLE, {"plant": "linear", "reference": "sine_sweep",
                   "fault": {"kind": "sensor_bias", "time": 0.0}}),
+        (NOZZLE, {"reference": "mixed", "episode_seconds": 1.0}),
         (LAUNCHER, {}),
         (LAUNCHER, {"plant": "linear", "reference": "attitude",
                     "fault": {"kind": "gain_loss", "time": 2.0, "magnitude": 0.5}}),

@@ -5,7 +5,13 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from ssme_envs.envs.references import REFERENCE_KINDS, reference_signals, uniforms_needed, unit_normals
+from ssme_envs.envs.references import (
+    MIXED_KINDS,
+    REFERENCE_KINDS,
+    reference_signals,
+    uniforms_needed,
+    unit_normals,
+)
 
 DT, LENGTH = 0.04, 251
 AMPLITUDE = np.array([0.01, 0.02])
@@ -52,6 +58,17 @@ def test_step_ramp_and_prbs_shapes():
     assert np.all(np.abs(prbs) == AMPLITUDE[:, None, None])
     switches = np.mean(np.diff(prbs, axis=1) != 0)
     assert switches == pytest.approx(DT / 0.5, rel=0.05)  # 0.08 per step, 100,000 chances
+
+
+def test_mixed_draws_each_kind_equally_and_builds_it_from_the_rest_of_its_column():
+    uniforms, refs = _draw("mixed", 1000)
+    choice = np.floor(uniforms[0] * len(MIXED_KINDS)).astype(int)
+    counts = np.bincount(choice, minlength=len(MIXED_KINDS))
+    assert stats.chisquare(counts).pvalue > 1e-3
+    for i in (0, 1, 2, 500, 999):
+        kind = MIXED_KINDS[choice[i]]
+        own = uniforms[1 : 1 + uniforms_needed(kind, LENGTH, 2, DT), i : i + 1]
+        assert np.array_equal(refs[:, :, i], reference_signals(kind, own, LENGTH, AMPLITUDE, DT)[:, :, 0])
 
 
 def test_unit_normals_are_standard_normal_and_batch_independent():

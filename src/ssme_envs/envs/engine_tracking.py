@@ -446,7 +446,9 @@ class EngineTrackingEnv(TrackingEnv):
     power : 65-109 %, default 100. plant : "truth" (default), "identified" (at 70, 80, 90, 100 %), a
     model.json path or a model. truth : TruthConfig or dict (asymmetric_gains, backlash,
     stiction, sensor_noise), the effects added to the plant. reference : "random_steps"
-    (default), "step", "ramp", "prbs", "zero"; reference_amplitude (normalized, default 0.01).
+    (default), "step", "ramp", "prbs", "sine_sweep", "attitude", "zero", "mixed" (each episode
+    one of random_steps, step, ramp, sine_sweep, attitude); reference_amplitude (normalized,
+    default 0.01).
     fault : e.g. ``{"kind": "stuck_valve", "time": 4.0, "index": 0}``, ``{"kind": "sensor_bias",
     "time": 4.0, "index": 0, "magnitude": 0.005}``, ``{"kind": "gain_loss", "time": 4.0,
     "index": 1, "magnitude": 0.5}``. episode_seconds, action_scale. render_mode : "human" or

@@ -329,9 +329,10 @@ class NozzleTVCEnv(TrackingEnv):
     ## Arguments
     plant : "bouc_wen" (default), "linear", "identified", a nozzle model.json path or a model.
     reference : "random_steps" (default), "step", "ramp", "prbs", "sine_sweep", "attitude",
-    "zero"; reference_amplitude_deg (0-3, default 3). sensor_noise (rad, default 1e-4). fault :
-    ``{"kind": "gain_loss", "time": 2.0, "magnitude": 0.5}`` or ``{"kind": "sensor_bias", "time":
-    2.0, "magnitude": 0.005}`` (rad). episode_seconds, actuator_lag, rate_limit, substeps.
+    "zero", "mixed" (each episode one of random_steps, step, ramp, sine_sweep, attitude: for
+    training); reference_amplitude_deg (0-3, default 3). sensor_noise (rad, default 1e-4).
+    fault : ``{"kind": "gain_loss", "time": 2.0, "magnitude": 0.5}`` or ``{"kind": "sensor_bias",
+    "time": 2.0, "magnitude": 0.005}`` (rad). episode_seconds, actuator_lag, rate_limit, substeps.
     render_mode : "human" or "rgb_array".
     """
 

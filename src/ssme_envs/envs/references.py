@@ -14,7 +14,9 @@ from typing import Any
 import numpy as np
 from scipy import signal
 
-REFERENCE_KINDS = ("random_steps", "step", "ramp", "prbs", "sine_sweep", "attitude", "zero")
+REFERENCE_KINDS = ("random_steps", "step", "ramp", "prbs", "sine_sweep", "attitude", "zero", "mixed")
+# what a "mixed" episode draws from, with equal probability
+MIXED_KINDS = ("random_steps", "step", "ramp", "sine_sweep", "attitude")
 FAULT_KINDS = ("stuck_valve", "sensor_bias", "gain_loss")
 
 
@@ -32,6 +34,8 @@ def uniforms_needed(kind: str, length: int, channels: int, dt: float) -> int:
         return 2 + channels
     if kind == "prbs":
         return length * channels + channels
+    if kind == "mixed":
+        return 1 + max(uniforms_needed(each, length, channels, dt) for each in MIXED_KINDS)
     raise ValueError(f"unknown reference kind {kind!r}; choose one of {', '.join(REFERENCE_KINDS)}")
 
 
@@ -57,6 +61,8 @@ def reference_signals(
     attitude : smooth commands like an attitude controller's: random steps through a critically
         damped second-order filter with a 1 Hz natural frequency.
     zero : regulation about the operating point.
+    mixed : each episode one of random_steps, step, ramp, sine_sweep, attitude, equally likely
+        (a training distribution that covers the evaluation scenarios).
 
     Every episode is computed from its own column alone, so one episode drawn by itself equals
     the same episode drawn in a batch.
@@ -66,6 +72,16 @@ def reference_signals(
     scale = amplitude[:, None, None]
     if kind == "zero":
         return np.zeros((channels, length, k))
+    if kind == "mixed":
+        choice = np.minimum((uniforms[0] * len(MIXED_KINDS)).astype(np.intp), len(MIXED_KINDS) - 1)
+        refs = np.empty((channels, length, k))
+        for index, each in enumerate(MIXED_KINDS):
+            episodes = np.flatnonzero(choice == index)
+            if episodes.size:
+                need = uniforms_needed(each, length, channels, dt)
+                picked = uniforms[1 : 1 + need][:, episodes]
+                refs[:, :, episodes] = reference_signals(each, picked, length, amplitude, dt)
+        return refs
     if kind == "sine_sweep":
         time = np.arange(length) * dt
         f0, f1, duration = 0.2, 5.0, max(time[-1], dt)
