@@ -76,7 +76,7 @@ CONTROLLERS: dict[str, tuple[Callable[[Any, str], Controller], tuple[str, ...], 
 
 
 def controller_names(env_id: str) -> list[str]:
-    """The controllers that serve an env, each also as ``name:truth``."""
+    """The controllers that serve an env (each also usable as ``name:truth``)."""
     return [name for name, (_, envs, _) in CONTROLLERS.items() if env_id in envs]
 
 

@@ -2,13 +2,12 @@
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-DEG = 180.0 / math.pi
+from ssme_envs.envs.nozzle_tvc import DEG  # degrees per radian, re-exported for the controllers
 
 
 @runtime_checkable
@@ -92,6 +91,12 @@ class BatchController:
             self.num_envs = num_envs
             self.state = self.initial_state(num_envs)
             return
+        envs = np.asarray(envs, dtype=np.intp)
+        if self.num_envs == 0 or np.any((envs < 0) | (envs >= self.num_envs)):
+            raise ValueError(
+                f"{self.name}: reset(envs=...) needs indices into the {self.num_envs} envs of a "
+                f"reset(num_envs=...) made before, got {envs.tolist()}"
+            )
         fresh = self.initial_state(len(envs))
         for key, value in fresh.items():
             self.state[key][envs] = value

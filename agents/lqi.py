@@ -81,6 +81,9 @@ def design_servo(
     process_ratio : the Kalman filter's process noise, an input disturbance of this many
         percent of the input's range (the model's error: larger trusts the measurements more).
     """
+    for name, value in (("integral_ratio", integral_ratio), ("process_ratio", process_ratio)):
+        if isinstance(value, bool) or not isinstance(value, int | float) or not 0 < value < np.inf:
+            raise ValueError(f"{name} must be a positive number, got {value!r}")
     a_z, b_z, q_z, r = augmented(design, integral_ratio)
     p_z = scipy.linalg.solve_discrete_are(a_z, b_z, q_z, r)
     gain = np.linalg.solve(r + b_z.T @ p_z @ b_z, b_z.T @ p_z @ a_z)
@@ -227,13 +230,14 @@ class ScheduledLQI(BatchController):
         designs = [linear_design(env, design, power=level) for level in levels]
         self.design = designs[0]
         servos = [design_servo(d, integral_ratio) for d in designs]
+        self.first = servos[0]  # the shapes of the state
         self.tables = {
             key: np.stack([getattr(s, key) for s in servos])
             for key in ("A", "B", "C", "gain", "kalman", "target", "ramp", "ramp_change")
         }
 
     def initial_state(self, n: int) -> dict[str, np.ndarray]:
-        return servo_state(SimpleNamespace(**{k: self.tables[k][0] for k in ("A", "B", "C")}), n)
+        return servo_state(self.first, n)
 
     def scheduled(self, power: np.ndarray) -> Any:
         """The servo matrices at each env's power, (N, ...) each."""

@@ -64,9 +64,9 @@ class MPC(BatchController):
         self, env: Any, design: str = "identified", horizon: int = 10, rate_limit: float = 0.5
     ) -> None:
         super().__init__()
-        if not isinstance(horizon, int) or horizon < 1:
+        if not isinstance(horizon, int) or isinstance(horizon, bool) or horizon < 1:
             raise ValueError(f"horizon must be a positive integer, got {horizon!r}")
-        if not 0 < rate_limit <= 2:
+        if not isinstance(rate_limit, int | float) or not 0 < rate_limit <= 2:
             raise ValueError(f"rate_limit must be in (0, 2], got {rate_limit!r}")
         self.design = linear_design(env, design)
         self.servo = design_servo(self.design)
@@ -77,12 +77,13 @@ class MPC(BatchController):
         self.max_change = rate_limit * self.design.input_limit
         # rows: inputs u_k = u_(k-1) + cumulative du (magnitude limits), then du (rate limits)
         self.cumulative = np.kron(np.tril(np.ones((horizon, horizon))), np.eye(self.m))
+        self.ahead = np.arange(1, horizon + 1).repeat(self.m)  # steps of the motion by each input
         self.failures = 0
         self._solver: osqp.OSQP | None = None
 
     def initial_state(self, n: int) -> dict[str, np.ndarray]:
-        if self._solver is None or self._solver_envs != n:
-            self._setup(n)
+        if self._solver is None or self._solver_envs != self.num_envs:  # one QP for the whole batch
+            self._setup(self.num_envs)
         return servo_state(self.servo, n)
 
     def _setup(self, n: int) -> None:
@@ -112,9 +113,8 @@ class MPC(BatchController):
         # the decision is the input change beyond the reference motion's (change per step)
         z, change = servo_deviation(s, state, x, r, step)
         n, size = len(obs), self.horizon * self.m
-        ahead = np.arange(1, self.horizon + 1).repeat(self.m)  # steps of the motion by each input
-        u_motion = np.tile(state["u"], (1, self.horizon)) + ahead * np.tile(change, (1, self.horizon))
         rate = np.tile(change, (1, self.horizon))
+        u_motion = np.tile(state["u"], (1, self.horizon)) + self.ahead * rate
         lower = np.concatenate([-limit - u_motion, -self.max_change - rate], axis=1)
         upper = np.concatenate([limit - u_motion, self.max_change - rate], axis=1)
         self._solver.update(q=(z @ self.linear.T).ravel(), l=lower.ravel(), u=upper.ravel())

@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 
 from agents.base import DEG, BatchController, task_of
-from agents.plants import linear_design, nozzle_joint
+from agents.plants import linear_design, second_order
 from ssme_envs.envs.launcher_pitch import LauncherTask
 from ssme_envs.envs.nozzle_tvc import NozzleTask
 
@@ -76,20 +76,14 @@ class PlacedPID(BatchController):
     def __init__(self, env: Any, design: str = "identified", omega: float | None = None) -> None:
         super().__init__()
         task = task_of(env)
-        self.design = linear_design(env, design)
-        if isinstance(task, LauncherTask):
-            a1, a0, g, default = 0.0, -task.instability, task.effectiveness, 4.0
-        elif isinstance(task, NozzleTask):
-            joint = nozzle_joint(task, design)
-            a1, a0, g, default = (
-                joint.b / joint.J,
-                joint.small_signal_stiffness / joint.J,
-                1.0 / joint.J,
-                60.0,
-            )
-        else:
+        if not isinstance(task, NozzleTask):
             raise TypeError(f"{self.name} is for NozzleTVC and LauncherPitch, not {type(task).__name__}")
-        self.kp, self.ki, self.kd = placed_pid(a1, a0, g, default if omega is None else omega)
+        if omega is None:
+            omega = 4.0 if isinstance(task, LauncherTask) else 60.0
+        if not (isinstance(omega, int | float) and omega > 0):
+            raise ValueError(f"omega must be a positive number (rad/s), got {omega!r}")
+        self.design = linear_design(env, design)
+        self.kp, self.ki, self.kd = placed_pid(*second_order(task, design), omega)
 
     def initial_state(self, n: int) -> dict[str, np.ndarray]:
         return {"integral": np.zeros(n)}

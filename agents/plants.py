@@ -60,16 +60,26 @@ def _continuous(a: np.ndarray, b: np.ndarray, dt: float) -> tuple[np.ndarray, np
     return ad, bd
 
 
+def second_order(task: NozzleTask, source: str) -> tuple[float, float, float]:
+    """(a1, a0, g) of the second-order design model ``x'' + a1 x' + a0 x = g u``: the nozzle
+    (torque -> angle, the joint's small-signal stiffness) or the launcher's rigid body (deflection
+    -> attitude, the servoed nozzle taken as ideal: its 15 Hz are far above the attitude loop's)."""
+    if isinstance(task, LauncherTask):
+        return 0.0, -task.instability, task.effectiveness
+    joint = nozzle_joint(task, source)
+    return joint.b / joint.J, joint.small_signal_stiffness / joint.J, 1.0 / joint.J
+
+
 def linear_design(env: Any, source: str = "identified", power: float | None = None) -> LinearDesign:
     """The design model of an ssme-envs env (scalar or native vector), from ``source``
     ("identified": what the identification pipeline produced; "truth": the env's own plant,
     its nonlinear effects left out). ``power`` (%): the throttle env's model at that level."""
     task = task_of(env)
     check_source(source)
+    if isinstance(task, NozzleTask):
+        a1, a0, g = second_order(task, source)
+        ad, bd = _continuous(np.array([[0.0, 1.0], [-a0, -a1]]), np.array([[0.0], [g]]), task.dt)
     if isinstance(task, LauncherTask):
-        # the rigid body; the servoed nozzle taken as ideal (its 15 Hz are far above the loop's)
-        a = np.array([[0.0, 1.0], [task.instability, 0.0]])
-        ad, bd = _continuous(a, np.array([[0.0], [task.effectiveness]]), task.dt)
         return LinearDesign(
             ad, bd, np.array([[1.0, 0.0]]), task.dt, Ports((0,), (2,), DEG, task.max_deflection),
             task.max_deflection, np.array([task.noise_std]), task.error_weight * DEG**2,
@@ -78,10 +88,6 @@ def linear_design(env: Any, source: str = "identified", power: float | None = No
             follow_ramps=False,
         )  # fmt: skip
     if isinstance(task, NozzleTask):
-        joint = nozzle_joint(task, source)
-        stiffness = joint.small_signal_stiffness
-        a = np.array([[0.0, 1.0], [-stiffness / joint.J, -joint.b / joint.J]])
-        ad, bd = _continuous(a, np.array([[0.0], [1.0 / joint.J]]), task.dt)
         return LinearDesign(
             ad, bd, np.array([[1.0, 0.0]]), task.dt, Ports((0,), (2,), DEG, task.torque_limit),
             task.torque_limit, np.array([task.noise_std]), task.error_weight * DEG**2,
@@ -102,4 +108,4 @@ def linear_design(env: Any, source: str = "identified", power: float | None = No
     raise TypeError(f"no design model for {type(task).__name__}")
 
 
-__all__ = ["DESIGN_SOURCES", "LinearDesign", "check_source", "linear_design", "nozzle_joint"]
+__all__ = ["DESIGN_SOURCES", "LinearDesign", "check_source", "linear_design", "nozzle_joint", "second_order"]

@@ -131,8 +131,10 @@ def train(config: dict[str, Any], out: Path, progress: bool = True) -> dict[str,
     from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
     from ssme_envs.envs.sb3_adapter import make_sb3_vec_env
+    from ssme_envs.evaluation import check_env_id
 
     config = check_config(config)
+    check_env_id(config["env"])
     if config["tensorboard"] and importlib.util.find_spec("tensorboard") is None:
         raise ValueError("TensorBoard logs need the tensorboard package: pip install tensorboard")
     out.mkdir(parents=True, exist_ok=True)

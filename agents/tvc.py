@@ -57,12 +57,10 @@ class HysteresisCompensated(BatchController):
         self.name = f"{base.name}+hysteresis"
 
     def initial_state(self, n: int) -> dict[str, np.ndarray]:
-        self.base.reset(num_envs=n)
         return {"w": np.zeros(n), "r": np.zeros(n)}
 
     def reset(self, seed: int | None = None, num_envs: int = 1, envs: np.ndarray | None = None) -> None:
-        if envs is not None:
-            self.base.reset(seed, num_envs, envs)
+        self.base.reset(seed, num_envs, envs)
         super().reset(seed, num_envs, envs)
 
     def compute(self, obs: np.ndarray) -> np.ndarray:

@@ -28,8 +28,7 @@ HERE = Path(__file__).resolve().parent
 ENVS = ("ssme_envs/EngineTracking-v0", "ssme_envs/EngineThrottle-v0", "ssme_envs/NozzleTVC-v0")
 
 
-def _steps_per_s(env_id: str, steps: int) -> float:
-    config = check_config(load_config(HERE / "configs" / "ppo_engine_tracking.toml"))
+def _steps_per_s(env_id: str, steps: int, config: dict) -> float:
     n = config["num_envs"]
     if env_id.startswith("ssme_envs/"):
         venv = make_sb3_vec_env(env_id, n, seed=0)
@@ -48,10 +47,11 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=262_144)
     parser.add_argument("--rounds", type=int, default=3)
     args = parser.parse_args()
+    config = check_config(load_config(HERE / "configs" / "ppo_engine_tracking.toml"))
     rates: dict[str, float] = {}
     for _ in range(args.rounds):  # alternate the envs so that load drifts hit all of them alike
         for env_id in ("CartPole-v1", *ENVS):
-            rates[env_id] = max(rates.get(env_id, 0.0), _steps_per_s(env_id, args.steps))
+            rates[env_id] = max(rates.get(env_id, 0.0), _steps_per_s(env_id, args.steps, config))
     reference = rates["CartPole-v1"]
     lines = [
         "# PPO throughput through the SB3 adapter",

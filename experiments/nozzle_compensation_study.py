@@ -21,10 +21,18 @@ from agents.base import DEG, task_of
 from agents.lqi import LQIServo
 from agents.plants import nozzle_joint
 from agents.tvc import HysteresisCompensated
-from ssme_envs.evaluation import SCENARIOS, evaluate
+from ssme_envs.evaluation import evaluate
 
 NOZZLE = "ssme_envs/NozzleTVC-v0"
-REFERENCES = ("sine_sweep", "attitude", "random_steps")
+# (reference / joint) -> the evaluation scenario that runs it
+SCENARIO_OF = {
+    "sine_sweep/bouc_wen": "sine_sweep",
+    "sine_sweep/linear": "sine_sweep_linear",
+    "attitude/bouc_wen": "attitude",
+    "attitude/linear": "attitude_linear",
+    "random_steps/bouc_wen": "random_steps",
+    "random_steps/linear": "linear_plant",
+}
 OUT = Path(__file__).resolve().parent / "results" / "nozzle_compensation_study.md"
 
 
@@ -36,14 +44,10 @@ class RateFeedforward(LQIServo):
         task = task_of(env)
         self.damping, self.dt = nozzle_joint(task, "identified").b, task.dt
 
-    def initial_state(self, n: int) -> dict[str, np.ndarray]:
-        return super().initial_state(n) | {"r_previous": np.full(n, np.nan)}
-
     def compute(self, obs: np.ndarray) -> np.ndarray:
         r = obs[:, 2] / DEG
-        previous = np.where(np.isnan(self.state["r_previous"]), r, self.state["r_previous"])
-        self.state["r_previous"] = r
-        torque = self.damping * (r - previous) / self.dt
+        previous = self.state["r"][:, 0]  # the servo's last reference (NaN before the first)
+        torque = self.damping * (r - np.where(np.isnan(previous), r, previous)) / self.dt
         return super().compute(obs) + (torque / self.design.ports.input_scale)[:, None]
 
 
@@ -60,19 +64,15 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--episodes", type=int, default=20)
     args = parser.parse_args()
-    scenarios = []
-    for reference in REFERENCES:
-        for joint in ("bouc_wen", "linear"):
-            name = f"{reference}/{joint}"
-            SCENARIOS[NOZZLE][name] = {"reference": reference, "plant": joint}
-            scenarios.append(name)
+    scenarios = list(SCENARIO_OF)
     factories = {
         "lqi": LQIServo,
         "lqi + compensation": _compensated(1.0),
         "lqi + 2x compensation": _compensated(2.0),
         "lqi + b r' feedforward": RateFeedforward,
     }
-    results = evaluate(NOZZLE, factories, scenarios, episodes=args.episodes)
+    results = evaluate(NOZZLE, factories, list(SCENARIO_OF.values()), episodes=args.episodes)
+    results = {label: results[SCENARIO_OF[label]] for label in scenarios}
     lines = [
         "# Nozzle hysteresis compensation on the Bouc-Wen and the linear joint",
         "",

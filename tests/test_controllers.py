@@ -11,7 +11,7 @@ import ssme_envs  # noqa: F401
 from agents import CONTROLLERS, Controller, controller_names, make_controller, parse_controller
 from agents.lqi import LQIServo, augmented, reference_step
 from agents.mpc import MPC
-from agents.pid import DecoupledPI, placed_pid
+from agents.pid import DecoupledPI, PlacedPID, placed_pid
 from agents.tvc import hysteresis_along
 from ssme_envs.evaluation import evaluate, make_env, rollout
 from ssme_envs.models.nozzle import identified_nozzle
@@ -165,6 +165,26 @@ def test_scheduled_lqi_flies_the_throttle_profile():
     factories = {name: parse_controller(name, throttle) for name in ("zero", "scheduled")}
     results = evaluate(throttle, factories, ["mission"], episodes=2)
     assert results["mission"]["scheduled"]["cost_mean"] < 0.2 * results["mission"]["zero"]["cost_mean"]
+
+
+def test_partial_resets_and_bad_arguments():
+    nozzle = make_env(NOZZLE, "attitude", 4)
+    obs, _ = nozzle.reset(seed=0)
+    for controller in (make_controller("hysteresis", nozzle, NOZZLE), MPC(make_env(TRACKING, "nominal", 4))):
+        with pytest.raises(ValueError, match=r"reset\(envs=\.\.\.\) needs indices"):
+            controller.reset(envs=np.array([1]))
+        controller.reset(num_envs=4)
+        controller.reset(envs=np.array([1, 3]))  # two episodes restart, the batch stays whole
+        batch = obs if controller.name != "mpc" else np.zeros((4, 10))
+        assert controller.act(batch).shape[0] == 4
+        with pytest.raises(ValueError, match="needs indices into the 4 envs"):
+            controller.reset(envs=np.array([4]))
+    with pytest.raises(ValueError, match="integral_ratio must be a positive number"):
+        LQIServo(nozzle, integral_ratio=-1.0)
+    with pytest.raises(ValueError, match="omega must be a positive number"):
+        PlacedPID(nozzle, omega=0.0)
+    with pytest.raises(ValueError, match="horizon must be a positive integer"):
+        MPC(make_env(TRACKING, "nominal", 1), horizon=True)
 
 
 def test_unknown_names_list_the_valid_ones():

@@ -85,6 +85,16 @@ def test_evaluate_command_writes_results_and_plots(tmp_path, capsys):
     assert "| lqi:truth |" in (out / "results.md").read_text()
 
 
+def test_evaluate_command_uses_its_seed(tmp_path):
+    def costs(seed):
+        out = tmp_path / str(seed)
+        assert main(["evaluate", "--env", TRACKING, "--controllers", "lqi", "--scenario", "noise",
+                     "--episodes", "2", "--seed", str(seed), "--out", str(out)]) == 0  # fmt: skip
+        return json.loads((out / "results.json").read_text())["scenarios"]["noise"]["lqi"]["cost_mean"]
+
+    assert costs(0) == costs(0) != costs(5)
+
+
 @pytest.mark.parametrize(
     ("args", "message"),
     [

@@ -17,6 +17,7 @@ from ssme_envs.models.nozzle import (
     published_nozzle,
     recommended_substeps,
     rk4_floats,
+    rk4_parameters,
     simulate_nozzle,
 )
 from ssme_envs.signals import prbs
@@ -112,8 +113,7 @@ def test_batch_is_bitwise_equal_to_single_runs_and_per_nozzle_parameters():
 def test_hysteresis_floor_changes_no_bit():
     # |w| is floored in |w|^n only to keep numpy's power off its slow path for exact zeros; the
     # trajectories from rest (w = 0 exactly at first) must equal those computed without it.
-    core = NozzleCore(published_nozzle("bouc_wen"), n=1)
-    floored = core._scalar_params
+    floored = rk4_parameters(published_nozzle("bouc_wen").normalized())
     assert floored.w_floor > 0
     unfloored = floored._replace(w_floor=0.0)
     for torque in (0.0, 500.0, -2.0e4):

@@ -33,7 +33,7 @@ class _Parser(argparse.ArgumentParser):
 def _names(text: str, option: str) -> tuple[str, ...]:
     names = tuple(n.strip() for n in text.split(","))
     if not all(names):
-        raise _UsageError(f"{option} must be a comma-separated list of column names, got {text!r}")
+        raise _UsageError(f"{option} must be a comma-separated list of names, got {text!r}")
     return names
 
 
@@ -333,34 +333,30 @@ def _controllers(env_id: str, specs: str | None) -> dict:
 
 
 def _run_evaluation(env_id: str, controllers: dict, scenarios: list[str] | None, episodes: int, out: Path,
-                    command: str) -> tuple[Path, dict]:  # fmt: skip
+                    command: str, seed: int = 0) -> tuple[Path, dict]:  # fmt: skip
     from ssme_envs.evaluation import evaluate
     from ssme_envs.results import write_evaluation
 
-    results = evaluate(env_id, controllers, scenarios, episodes, progress=lambda m: print(m, file=sys.stderr))
+    results = evaluate(
+        env_id, controllers, scenarios, episodes, seed, progress=lambda m: print(m, file=sys.stderr)
+    )
     path = write_evaluation(env_id, results, out, command)
     return path, results
 
 
 def _evaluate(args: argparse.Namespace) -> int:
-    from ssme_envs.evaluation import check_env_id, scenario_names
+    from ssme_envs.evaluation import check_env_id, check_scenarios
 
     env_id = check_env_id(args.env)
     if args.episodes < 1:
         raise _UsageError(f"--episodes must be a positive integer, got {args.episodes}")
     scenarios = None
     if args.scenario is not None:
-        scenarios = list(_names(args.scenario, "--scenario"))
-        valid = scenario_names(env_id)
-        unknown = [s for s in scenarios if s not in valid]
-        if unknown:
-            raise _UsageError(
-                f"unknown scenario {', '.join(unknown)} for {env_id}; choose from {', '.join(valid)}"
-            )
+        scenarios = check_scenarios(env_id, _names(args.scenario, "--scenario"))
     controllers = _controllers(env_id, args.controllers)
     _make_dir(args.out)
     command = "ssme-envs " + " ".join(sys.argv[1:]) if sys.argv[1:2] == ["evaluate"] else "ssme-envs evaluate"
-    path, _ = _run_evaluation(env_id, controllers, scenarios, args.episodes, args.out, command)
+    path, _ = _run_evaluation(env_id, controllers, scenarios, args.episodes, args.out, command, args.seed)
     print(f"wrote {path}, {args.out / 'results.json'} and the plots")
     return 0
 
@@ -375,7 +371,7 @@ def _train(args: argparse.Namespace) -> int:
     if args.tensorboard:
         config["tensorboard"] = True
     config = check_config(config, str(args.config or "options"))
-    check_env_id(config["env"])
+    check_env_id(config["env"])  # before the output directory is made
     _make_dir(args.out)
     summary = train(config, args.out)
     print(

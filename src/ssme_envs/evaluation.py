@@ -90,12 +90,19 @@ def check_env_id(env_id: str) -> str:
     return env_id
 
 
+def check_scenarios(env_id: str, names: Sequence[str]) -> list[str]:
+    """The scenario names, checked against the env's; ValueError listing the valid ones."""
+    valid = SCENARIOS[check_env_id(env_id)]
+    unknown = [name for name in names if name not in valid]
+    if unknown:
+        choices = ", ".join(valid)
+        raise ValueError(f"unknown scenario {', '.join(unknown)} for {env_id}; choose from {choices}")
+    return list(names)
+
+
 def make_env(env_id: str, scenario: str, num_envs: int) -> gym.vector.VectorEnv:
     """The native vector env of a scenario."""
-    if scenario not in SCENARIOS[check_env_id(env_id)]:
-        raise ValueError(
-            f"unknown scenario {scenario!r} for {env_id}; choose one of {', '.join(SCENARIOS[env_id])}"
-        )
+    check_scenarios(env_id, [scenario])
     import ssme_envs  # noqa: F401  (registers the environments)
 
     return gym.make_vec(
@@ -249,6 +256,11 @@ def _step_response(t: np.ndarray, y: np.ndarray, r: np.ndarray, alive: np.ndarra
     return summary
 
 
+def scenarios_of(results: Mapping[str, Any]) -> list[str]:
+    """The scenario names of :func:`evaluate`'s results (without the ``_rollouts`` kept beside)."""
+    return [key for key in results if not key.startswith("_")]
+
+
 def evaluate(
     env_id: str,
     controllers: Mapping[str, Callable[[Any], Any]],
@@ -263,7 +275,7 @@ def evaluate(
     check_env_id(env_id)
     if not isinstance(episodes, int) or episodes < 1:
         raise ValueError(f"episodes must be a positive integer, got {episodes!r}")
-    names = scenario_names(env_id) if scenarios is None else list(scenarios)
+    names = scenario_names(env_id) if scenarios is None else check_scenarios(env_id, scenarios)
     say = progress or (lambda _: None)
     results: dict[str, Any] = {"_rollouts": {}}
     total, done = len(names) * len(controllers), 0
@@ -288,10 +300,12 @@ __all__ = [
     "Layout",
     "Rollout",
     "check_env_id",
+    "check_scenarios",
     "evaluate",
     "make_env",
     "metrics",
     "rollout",
     "scenario_names",
+    "scenarios_of",
     "step_metrics",
 ]

@@ -6,6 +6,8 @@ import re
 from pathlib import Path
 from typing import Any
 
+from ssme_envs.evaluation import scenarios_of
+
 TRACKING = "ssme_envs/EngineTracking-v0"
 THROTTLE = "ssme_envs/EngineThrottle-v0"
 NOZZLE = "ssme_envs/NozzleTVC-v0"
@@ -145,9 +147,7 @@ def nozzle_tables(results: dict) -> list[str]:
         "|---|---|---|---|---|",
     ]
     change = {}
-    for scenario in results:
-        if scenario.startswith("_"):
-            continue
+    for scenario in scenarios_of(results):
         iae = {c: results[scenario][c]["outputs"]["angle"]["iae"] for c in ("pid", "lqi", "hysteresis")}
         change[scenario] = 100 * (iae["hysteresis"] / iae["lqi"] - 1)
         lines.append(
@@ -190,7 +190,7 @@ def write_main_report(
     lines += ["### Every scenario", ""]
     for env_id, results in evaluations.items():
         folder = env_id.split("/")[-1]
-        scenarios = [s for s in results if not s.startswith("_")]
+        scenarios = scenarios_of(results)
         lines += [f"#### {env_id}", "", f"Tables and plots: [{folder}/results.md]({folder}/results.md).", ""]
         lines += [f"![{scenarios[0]}]({folder}/{scenarios[0]}.png)", ""]
         for scenario in scenarios:

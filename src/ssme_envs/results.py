@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from ssme_envs.evaluation import LAYOUTS, Rollout
+from ssme_envs.evaluation import LAYOUTS, Rollout, scenarios_of
 
 
 def _clean(value: Any) -> Any:
@@ -62,11 +62,9 @@ def scenario_table(env_id: str, scenario: str, rows: dict[str, dict]) -> str:
 def plot_scenario(env_id: str, scenario: str, runs: dict[str, Rollout], path: Path) -> None:
     """Responses of the first episode of every controller overlaid: one panel per output (and its
     reference), one per actuator."""
-    import matplotlib
+    from ssme_envs.identification.report import agg_pyplot
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = agg_pyplot()
     layout = LAYOUTS[env_id]
     panels = len(layout.outputs) + len(layout.actuators)
     fig, axes = plt.subplots(panels, 1, figsize=(8, 2.2 * panels), sharex=True, squeeze=False)
@@ -97,7 +95,7 @@ def plot_scenario(env_id: str, scenario: str, runs: dict[str, Rollout], path: Pa
 def write_evaluation(env_id: str, results: dict[str, Any], out: Path, command: str) -> Path:
     """results.json, results.md and one PNG per scenario under ``out``; returns results.md."""
     out.mkdir(parents=True, exist_ok=True)
-    scenarios = [k for k in results if not k.startswith("_")]
+    scenarios = scenarios_of(results)
     data = {"env": env_id, "command": command, "scenarios": {s: results[s] for s in scenarios}}
     (out / "results.json").write_text(json.dumps(_clean(data), indent=1) + "\n")
     lines = [f"# Evaluation on {env_id}", "", f"Command: `{command}`", ""]

@@ -12,8 +12,8 @@ import gymnasium as gym
 import numpy as np
 
 from ssme_envs.envs.references import (
-    REFERENCE_KINDS,
     Fault,
+    check_reference,
     reference_signals,
     uniforms_needed,
     unit_normals,
@@ -128,8 +128,7 @@ class EngineTask:
                 f"got {model.n_inputs} and {model.n_outputs}"
             )
         config = resolve_truth(truth)
-        if reference not in REFERENCE_KINDS:
-            raise ValueError(f"unknown reference {reference!r}; choose one of {', '.join(REFERENCE_KINDS)}")
+        check_reference(reference)
         try:
             amplitude = np.broadcast_to(np.asarray(reference_amplitude, dtype=float), (2,)).copy()
         except (TypeError, ValueError):

@@ -16,7 +16,6 @@ import scipy.linalg
 from ssme_envs.envs.nozzle_tvc import (
     ARRAY_OPS,
     DEG,
-    FLOAT_OPS,
     NozzleTask,
     NozzleTVCEnv,
     _number,
@@ -111,11 +110,6 @@ class LauncherTask(NozzleTask):
         high = np.array([20, 200, 10, 30, 10, 20, 1], dtype=np.float32)
         return gym.spaces.Box(-high, high, dtype=np.float32)
 
-    def zero_state(self, n: int) -> list:
-        """[nozzle (3, n): angle, rate, hysteresis w; then each (n,): pitch attitude (rad),
-        pitch rate (rad/s), error integral, previous action], at rest."""
-        return [np.zeros((3, n))] + [np.zeros(n) for _ in range(4)]
-
     def initial_observation(self, ref: np.ndarray, draws: np.ndarray) -> np.ndarray:
         """Observations at reset (7, N) float32 from the first reference and noise rows (1, N)."""
         m = self._measure(0.0, np.asarray(draws[0], dtype=np.float64), 0, ARRAY_OPS)
@@ -133,28 +127,23 @@ class LauncherTask(NozzleTask):
         lim = self.torque_limit
         fault = self.fault
         gain_loss = fault is not None and fault.kind == "gain_loss"
+        if gain_loss:  # times 1.0 before the fault: exact
+            servo_gain = ops.where(t > self.fault_step, fault.magnitude, 1.0)
         p00, p01, p10, p11, g0_theta, g0_q, g1_theta, g1_q = self.body
         h = self.dt / self.substeps
-        params = self.float_params if ops is FLOAT_OPS else self.array_params
+        params = self.rk4_params
         for _ in range(self.substeps):
             d = nozzle[0]
             torque = ops.clip(drive - k_p * d - k_d * nozzle[1], -lim, lim)
             if gain_loss:
-                torque = ops.where(t > self.fault_step, torque * fault.magnitude, torque)
+                torque = torque * servo_gain
             # the body's share of the old deflection is taken before the nozzle moves (in place)
             theta_next = p00 * theta + p01 * q + g0_theta * d
             q_next = p10 * theta + p11 * q + g0_q * d
             nozzle = ops.integrate(nozzle, torque, h, 1, params)
             d = nozzle[0]
             theta, q = theta_next + g1_theta * d, q_next + g1_q * d
-        m = self._measure(theta, noise, t, ops)
-        e = (ref - m) * DEG
-        limit = self.integral_limit
-        integral = ops.clip(integral + e * self.dt, -limit, limit)
-        change = a - prev
-        terminated = abs(theta) > self.envelope
-        reward = -self.error_weight * (e * e) - self.rate_weight * (change * change)
-        reward = reward - (self.step_cost_bound * (self.horizon - t + 1)) * terminated
+        m, e, integral, reward, terminated = self._score(theta, a, prev, t, ref, noise, integral, ops)
         obs = (m * DEG, q * DEG, ref * DEG, e, integral, nozzle[0] * DEG, a)
         return [nozzle, theta, q, integral, a], obs, reward, terminated
 

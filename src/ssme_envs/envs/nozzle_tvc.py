@@ -12,19 +12,20 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from ssme_envs.envs.references import REFERENCE_KINDS, Fault, reference_signals, uniforms_needed, unit_normals
+from ssme_envs.envs.references import Fault, check_reference, reference_signals, uniforms_needed, unit_normals
 from ssme_envs.envs.tracking_env import TrackingEnv
 from ssme_envs.models.nozzle import (
     DEFAULT_TORQUE_LIMIT,
     NOZZLE_DT,
-    NozzleCore,
     NozzleModel,
     NozzleParameters,
+    RK4Parameters,
     identified_nozzle,
     published_nozzle,
     recommended_substeps,
     rk4_arrays,
     rk4_floats,
+    rk4_parameters,
 )
 
 DEG = 180.0 / math.pi
@@ -93,8 +94,7 @@ def episode_options(
 ) -> dict[str, Any]:
     """The checked episode fields of a nozzle-driven task: horizon, reference, amplitude (rad),
     noise_std (rad) and fault."""
-    if reference not in REFERENCE_KINDS:
-        raise ValueError(f"unknown reference {reference!r}; choose one of {', '.join(REFERENCE_KINDS)}")
+    check_reference(reference)
     amplitude = _number("reference_amplitude_deg", amplitude_deg, 0.0, max_amplitude_deg)
     parsed = Fault.parse(fault, 1, 1)
     if parsed is not None and parsed.kind not in NOZZLE_FAULTS:
@@ -127,8 +127,7 @@ class NozzleTask:
     rate_weight: float = 0.1
     envelope: float = math.radians(6.0)  # |angle| that ends an episode (twice the working range)
     integral_limit: float = 10.0  # deg s
-    float_params: tuple = field(init=False, repr=False)
-    array_params: tuple = field(init=False, repr=False)
+    rk4_params: RK4Parameters = field(init=False, repr=False)  # floats, for both carriers
     fault_step: int = field(init=False)
     # largest reward loss of one step inside the envelope (with 1 deg for noise)
     step_cost_bound: float = field(init=False)
@@ -171,9 +170,7 @@ class NozzleTask:
         )
 
     def __post_init__(self) -> None:
-        core = NozzleCore(self.plant, 1, self.dt, self.substeps, self.torque_limit)
-        object.__setattr__(self, "float_params", core._scalar_params)
-        object.__setattr__(self, "array_params", core._params)
+        object.__setattr__(self, "rk4_params", rk4_parameters(self.plant.normalized()))
         object.__setattr__(
             self, "fault_step", round(self.fault.time / self.dt) if self.fault is not None else -1
         )
@@ -258,20 +255,26 @@ class NozzleTask:
             torque,
             self.dt / self.substeps,
             self.substeps,
-            self.float_params if ops is FLOAT_OPS else self.array_params,
+            self.rk4_params,
         )
-        x = plant[0]
+        m, e, integral, reward, terminated = self._score(plant[0], a, prev, t, ref, noise, integral, ops)
+        rate = (m - m_prev) * (DEG / self.dt)
+        obs = (m * DEG, rate, ref * DEG, e, integral, a)
+        return [plant, torque, m, integral, a], obs, reward, terminated
+
+    def _score(self, x: Any, a: Any, prev: Any, t: Any, ref: Any, noise: Any, integral: Any,
+               ops: SimpleNamespace) -> tuple:  # fmt: skip
+        """What follows the tracked output x (rad) at step t: measurement m, error e (deg), error
+        integral, reward, terminated (also for the launcher's attitude)."""
         m = self._measure(x, noise, t, ops)
         e = (ref - m) * DEG
-        rate = (m - m_prev) * (DEG / self.dt)
         lim = self.integral_limit
         integral = ops.clip(integral + e * self.dt, -lim, lim)
         d = a - prev
         terminated = abs(x) > self.envelope
         reward = -self.error_weight * (e * e) - self.rate_weight * (d * d)
         reward = reward - (self.step_cost_bound * (self.horizon - t + 1)) * terminated
-        obs = (m * DEG, rate, ref * DEG, e, integral, a)
-        return [plant, torque, m, integral, a], obs, reward, terminated
+        return m, e, integral, reward, terminated
 
     def batch_step(
         self,

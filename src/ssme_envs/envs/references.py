@@ -20,6 +20,13 @@ MIXED_KINDS = ("random_steps", "step", "ramp", "sine_sweep", "attitude")
 FAULT_KINDS = ("stuck_valve", "sensor_bias", "gain_loss")
 
 
+def check_reference(kind: str) -> str:
+    """The reference kind, or ValueError listing the valid ones."""
+    if kind not in REFERENCE_KINDS:
+        raise ValueError(f"unknown reference {kind!r}; choose one of {', '.join(REFERENCE_KINDS)}")
+    return kind
+
+
 def uniforms_needed(kind: str, length: int, channels: int, dt: float) -> int:
     """How many uniform numbers :func:`reference_signals` consumes for one episode."""
     if kind == "zero":

@@ -1,6 +1,6 @@
 """Native vector environments: N plants stepped as arrays by their task's batched step.
 
-One class, :class:`TrackingVectorEnv`, serves every tracking task (engine, throttle, nozzle).
+One class, :class:`TrackingVectorEnv`, serves every tracking task (engine, throttle, nozzle, launcher).
 A task provides ``horizon``, ``n_actions``, ``observation_space()``, ``draw_size``,
 ``episodes(uniforms, noise_out)``, ``shared_references``, ``zero_state(n)``,
 ``initial_observation(refs, noise)`` and ``batch_step(state, actions, t, refs, noise, synced)``.

@@ -178,8 +178,8 @@ class NozzleCore:
         p = {key: np.broadcast_to(np.asarray(value, dtype=float), (self.n,)) for key, value in params.items()}
         self._k_el, self._k_hys = p["k_el"], p["k_hys"]
         shared = all(np.all(q == q[0]) for q in p.values())
+        # floats when every nozzle has the same parameters (always for one): the float integrator's
         self._params = rk4_parameters({k: (float(q[0]) if shared else q) for k, q in p.items()})
-        self._scalar_params = rk4_parameters({k: float(q[0]) for k, q in p.items()})
         self.dt = float(dt)
         self.substeps = int(substeps)
         self.torque_limit = float(torque_limit)
@@ -200,7 +200,7 @@ class NozzleCore:
                 float(np.ravel(tau)[0]),
                 self.dt / self.substeps,
                 self.substeps,
-                self._scalar_params,
+                self._params,
             )
             self.state[:, 0] = (x, v, w)
         else:
@@ -241,12 +241,12 @@ def simulate_nozzle(
     if tau.ndim == 2 and core.n != n:
         raise ValueError(f"{core.n} parameter sets for {n} torque sequences")
     horizon = tau.shape[-1]
-    if core.n == 1:  # the float path of _rk4 without the per-sample bookkeeping of NozzleCore.step
+    if core.n == 1:  # rk4_floats without the per-sample bookkeeping of NozzleCore.step
         limit, h, steps, params = (
             core.torque_limit,
             core.dt / core.substeps,
             core.substeps,
-            core._scalar_params,
+            core._params,
         )
         x = v = w = 0.0
         angles = [0.0] * horizon
@@ -312,8 +312,8 @@ def rk4_floats(
     """``steps`` RK4 steps of length h (s) of one nozzle under the torque tau (N m), held.
 
     x (rad), v (rad/s) and w (rad, normalized hysteresis) in, the same out."""
-    _, b_j, k_el_j, k_hys_j, beta, gamma, n, floor, hys = p
-    accel0 = tau * p.inv_j
+    inv_j, b_j, k_el_j, k_hys_j, beta, gamma, n, floor, hys = p
+    accel0 = tau * inv_j
     power, copysign = np.power, math.copysign
     half, sixth = 0.5 * h, h / 6.0
 
