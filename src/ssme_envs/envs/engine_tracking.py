@@ -24,6 +24,7 @@ from ssme_envs.models.engine import (
     StepParameters,
     TruthConfig,
     identified_model,
+    output_coupling,
     step_arrays,
     step_floats,
 )
@@ -126,6 +127,12 @@ class EngineTask:
             raise ValueError(
                 "plant must have 2 inputs (OPOV, FPOV) and 2 outputs (Pc, MR), "
                 f"got {model.n_inputs} and {model.n_outputs}"
+            )
+        if output_coupling(model) is not None:
+            raise ValueError(
+                "plant couples its outputs (C = H [0 I] with H != I, indices "
+                f"{list(model.observability_indices)}): the engine environments step models whose "
+                "outputs are their last two states; identify with --indices 2,2"
             )
         config = resolve_truth(truth)
         check_reference(reference)

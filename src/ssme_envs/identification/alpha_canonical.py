@@ -37,34 +37,25 @@ Any number of inputs and outputs and any observability indices. The steps:
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from dataclasses import dataclass, field
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg
 
+from ssme_envs.identification.covariance import parameter_uncertainty
+from ssme_envs.identification.structure import (
+    DEFAULT_MAX_INDEX,
+    DEFAULT_RANK_TOL,
+    StructureSearch,
+    lagged,
+)
+from ssme_envs.identification.structure import estimate_indices as structure_search
 from ssme_envs.models.engine import TruthConfig, simulate
 from ssme_envs.models.statespace import AlphaCanonicalModel, AlphaStructure, check_dt
 
-DEFAULT_MAX_INDEX = 6
-DEFAULT_RANK_TOL = 0.1
-
-
-@dataclass
-class StructureSearch:
-    """Outcome of the row-by-row rank search.
-
-    Attributes
-    ----------
-    indices : tuple of int
-        Observability index of each output.
-    ratios : list of (output, power, ratio, kept)
-        For each candidate row ``c_output A^power`` examined: the norm of its new component over
-        its norm, and whether it was kept.
-    """
-
-    indices: tuple[int, ...]
-    ratios: list[tuple[int, int, float, bool]] = field(default_factory=list)
+# Simulation errors below this fraction of an output's spread are round-off (exact fits).
+CRITERION_FLOOR = 1e-10
 
 
 @dataclass
@@ -153,14 +144,6 @@ def _binary_amplitudes(u: np.ndarray, names: Sequence[str] | None = None) -> np.
     return out
 
 
-def _lags(x: np.ndarray, lags: Sequence[int], start: int) -> np.ndarray:
-    """Columns ``x[k - lag]`` for k = start..T-1, for each lag and each channel (lag-major)."""
-    horizon = x.shape[0]
-    if not lags:
-        return np.empty((horizon - start, 0))
-    return np.hstack([x[start - lag : horizon - lag] for lag in lags])
-
-
 def _input_features(u: np.ndarray, gamma: np.ndarray, asymmetric: bool) -> np.ndarray:
     """Inputs plus |u| of the non-binary inputs (their asymmetric part)."""
     if not asymmetric:
@@ -177,93 +160,34 @@ def estimate_indices(
     output_names: Sequence[str] | None = None,
     input_names: Sequence[str] | None = None,
 ) -> StructureSearch:
-    """Observability indices by the row-by-row rank search on Q_o (eqs 28-33).
+    """Observability indices by the row-by-row rank search (see :mod:`.structure`), without the
+    choice among neighbours that :func:`identify` adds.
 
     Parameters
     ----------
     u, y : arrays, shapes (T, m), (T, p)
         Input and output record (deviations), already checked by :func:`check_record`.
-    max_index : int
-        Largest observability index searched (the lag window L).
-    rank_tol : float
-        Relative norm below which a candidate row counts as dependent.
+    max_index, rank_tol : see :func:`ssme_envs.identification.structure.estimate_indices`.
     asymmetric : bool
         Allow for the piecewise-linear input gain of eq 36.
     output_names, input_names : sequences of str, optional
         Used in error messages.
     """
-    if max_index < 1:
-        raise ValueError(f"max_index must be >= 1, got {max_index}")
-    if not 0 < rank_tol < 1:
-        raise ValueError(f"rank_tol must be in (0, 1), got {rank_tol}")
-    horizon, p = y.shape
-    names = _names(output_names, p, "y")
-    window = max_index
     gamma = _binary_amplitudes(u, input_names) if asymmetric else np.full(u.shape[1], np.nan)
-    feats = _input_features(u, gamma, asymmetric)
-    n_feat = feats.shape[1]
-    start = 2 * window
-    needed = (window * n_feat + 1) + window * n_feat + window * p
-    if horizon - start < 2 * needed:
-        raise ValueError(
-            f"the record has {horizon} samples; a structure search up to index {max_index} needs at "
-            f"least {start + 2 * needed} (use a longer record or a smaller max_index)"
-        )
-    lags = range(1, window + 1)
-    r_block = np.hstack([_lags(feats, lags, start), np.ones((horizon - start, 1))])
-    z_block = _lags(feats, range(window + 1, 2 * window + 1), start)
-    # Column (k, i) of q_block is y_i(t - L + k), which carries the row c_i A^k.
-    q_block = _lags(y, range(window, 0, -1), start)
-    n_r, n_z = r_block.shape[1], z_block.shape[1]
-    tri = scipy.linalg.qr(np.hstack([r_block, z_block, q_block]), mode="r", check_finite=False)[0]
-    diag = np.abs(np.diag(tri)[: n_r + n_z])
-    if diag.min() < 1e-9 * diag.max():
-        raise ValueError(
-            f"the inputs are not persistently exciting over {2 * window} lags (the lagged-input "
-            "matrix is rank-deficient): use a richer input such as a PRBS"
-        )
-    instrumented = tri[n_r : n_r + n_z, n_r + n_z :]  # Q projected on the instruments, orthonormal coords
-
-    basis = np.empty((n_z, 0))
-    active = [True] * p
-    indices = [0] * p
-    ratios: list[tuple[int, int, float, bool]] = []
-    for power in range(window):
-        for i in range(p):
-            if not active[i]:
-                continue
-            col = instrumented[:, power * p + i]
-            norm = np.linalg.norm(col)
-            resid = col - basis @ (basis.T @ col)
-            ratio = float(np.linalg.norm(resid) / norm) if norm > 0 else 0.0
-            kept = ratio > rank_tol
-            ratios.append((i, power, ratio, kept))
-            if kept:
-                basis = np.column_stack([basis, resid / np.linalg.norm(resid)])
-                indices[i] += 1
-            else:
-                active[i] = False
-    for i in range(p):
-        if indices[i] == 0:
-            raise ValueError(
-                f"output '{names[i]}' adds nothing to the earlier outputs (C is not of full row rank)"
-            )
-        if active[i]:
-            raise ValueError(
-                f"the observability index of output '{names[i]}' exceeds max_index={max_index}: raise "
-                "max_index, or the data may be too noisy for the rank tolerance"
-            )
-    return StructureSearch(tuple(indices), ratios)
+    return structure_search(_input_features(u, gamma, asymmetric), y, max_index, rank_tol, output_names)
 
 
 def _regressors(
     structure: AlphaStructure, output: int, y: np.ndarray, feats: np.ndarray, start: int
 ) -> np.ndarray:
-    """phi_i(k) of eq 11 for k = start..T-1: free output lags, input-feature lags, a constant."""
+    """phi_i(k) of eq 11 for k = start..T-1: free output lags, the coupled outputs' current
+    samples (free H entries), input-feature lags, a constant."""
     mu_i = structure.indices[output]
-    y_cols = [y[start - 1 - d : y.shape[0] - 1 - d, j] for j, d in structure.free_output_lags(output)]
-    u_cols = _lags(feats, range(1, mu_i + 1), start)
-    return np.column_stack([*y_cols, u_cols, np.ones(y.shape[0] - start)])
+    horizon = y.shape[0]
+    y_cols = [y[start - 1 - d : horizon - 1 - d, j] for j, d in structure.free_output_lags(output)]
+    y_cols += [y[start:, j] for j in structure.coupled_outputs(output)]
+    u_cols = lagged(feats, range(1, mu_i + 1), start)
+    return np.column_stack([*y_cols, u_cols, np.ones(horizon - start)])
 
 
 def _simulation_error(
@@ -277,6 +201,116 @@ def _simulation_error(
     return float(np.sum((y - simulated) ** 2)), simulated
 
 
+@dataclass
+class _Fit:
+    """One structure fitted: the model and what its covariance needs."""
+
+    model: AlphaCanonicalModel
+    thetas: list[np.ndarray]
+    phis: list[np.ndarray]
+    instruments: list[np.ndarray]
+    intercept: np.ndarray
+    simulated: np.ndarray | None
+    start: int
+    build: Callable[[list[np.ndarray]], tuple[AlphaCanonicalModel, np.ndarray]]
+
+    def residuals(self, y: np.ndarray) -> list[np.ndarray]:
+        """Equation errors ``y_i - phi_i theta_i`` of each output's regression."""
+        pairs = zip(self.phis, self.thetas, strict=True)
+        return [y[self.start :, i] - phi @ theta for i, (phi, theta) in enumerate(pairs)]
+
+
+def _fit(
+    structure: AlphaStructure,
+    u: np.ndarray,
+    y: np.ndarray,
+    dt: float,
+    method: str,
+    asymmetric: bool,
+    names: tuple[tuple[str, ...], tuple[str, ...]],
+) -> _Fit:
+    """Least squares (eq 27), then for ``method="iv"`` up to two instrumental-variable passes."""
+    in_names, out_names = names
+    m, p = u.shape[1], y.shape[1]
+    if structure.n_outputs != p:
+        raise ValueError(f"{len(structure.indices)} observability indices given for {p} outputs")
+    gamma = _binary_amplitudes(u, in_names) if asymmetric else np.full(m, np.nan)
+    feats = _input_features(u, gamma, asymmetric)
+    start = max(structure.indices)
+    phis = [_regressors(structure, i, y, feats, start) for i in range(p)]
+    n_params = max(phi.shape[1] for phi in phis)
+    if u.shape[0] - start < 2 * n_params:
+        raise ValueError(
+            f"the record has {u.shape[0]} samples; observability indices {list(structure.indices)} "
+            f"need at least {start + 2 * n_params}"
+        )
+    thetas = []
+    for i, phi in enumerate(phis):
+        theta, _, rank, _ = np.linalg.lstsq(phi, y[start:, i], rcond=None)
+        if rank < phi.shape[1]:
+            raise ValueError(
+                f"the regression for output '{out_names[i]}' is rank-deficient ({rank} of "
+                f"{phi.shape[1]}): the record does not determine indices {list(structure.indices)}"
+            )
+        thetas.append(theta)
+
+    def build(thetas: list[np.ndarray]) -> tuple[AlphaCanonicalModel, np.ndarray]:
+        a, b, c, lam, intercept = _realize(structure, thetas, m, gamma, asymmetric, out_names)
+        model = AlphaCanonicalModel(
+            A=a,
+            B=b,
+            C=c,
+            dt=dt,
+            observability_indices=structure.indices,
+            lam=lam,
+            input_names=in_names,
+            output_names=out_names,
+            fit={"method": method, "samples": int(u.shape[0])},
+        )
+        return model, intercept
+
+    model, intercept = build(thetas)
+    best, simulated = _simulation_error(model, u, y)
+    fit = _Fit(model, thetas, phis, phis, intercept, simulated, start, build)
+    if method == "iv":
+        # Each pass takes the previous model's simulated output as instruments; a pass is kept
+        # only if its model is stable and simulates the record at least as well (weak
+        # instruments can otherwise throw the estimate away from the least-squares one).
+        for _ in range(2):
+            source = fit.simulated
+            if source is None:  # an unstable start still gives instruments
+                source = simulate(fit.model, u, TruthConfig.ideal())[1]
+            instruments = [_regressors(structure, i, source, feats, start) for i in range(p)]
+            thetas = [
+                np.linalg.lstsq(z.T @ phi, z.T @ y[start:, i], rcond=None)[0]
+                for i, (z, phi) in enumerate(zip(instruments, phis, strict=True))
+            ]
+            candidate, intercept = build(thetas)
+            error, candidate_simulated = _simulation_error(candidate, u, y)
+            if not error <= best:
+                break
+            best = error
+            fit = _Fit(candidate, thetas, phis, instruments, intercept, candidate_simulated, start, build)
+    return fit
+
+
+def _criterion(fit: _Fit, y: np.ndarray, use_simulation: bool) -> tuple[float, int, tuple[float, ...]]:
+    """BIC of a fitted structure: N sum_i log(mse_i) + (parameters) log N, with mse_i the mean
+    squared simulation error of output i (one-step error of the regression when the models are
+    unstable), floored at round-off so that exact fits tie and the smaller model wins."""
+    n = y.shape[0] - fit.start
+    k = sum(theta.size for theta in fit.thetas)
+    if use_simulation:
+        if fit.simulated is None:
+            return float("inf"), k, ()
+        err = (y - fit.simulated)[fit.start :]
+    else:
+        err = np.column_stack(fit.residuals(y))
+    mse = np.mean(err**2, axis=0)
+    floor = (CRITERION_FLOOR * np.std(y, axis=0)) ** 2
+    return float(n * np.sum(np.log(np.maximum(mse, floor))) + k * np.log(n)), k, tuple(np.sqrt(mse).tolist())
+
+
 def identify(
     u: np.ndarray,
     y: np.ndarray,
@@ -288,6 +322,7 @@ def identify(
     rank_tol: float = DEFAULT_RANK_TOL,
     input_names: Sequence[str] | None = None,
     output_names: Sequence[str] | None = None,
+    uncertainty: bool = True,
 ) -> Identification:
     """Identify an alpha-canonical model with asymmetric input gains from one record.
 
@@ -298,7 +333,9 @@ def identify(
     dt : float
         Sample time, s.
     indices : sequence of int, optional
-        Observability indices; estimated by :func:`estimate_indices` when omitted.
+        Observability indices. When omitted, the rank search (:func:`estimate_indices`) proposes
+        its index set and the sets one decision away, and the one with the lowest BIC of its
+        simulation error is kept (``result.search`` holds every candidate and the margin).
     method : {"iv", "ls"}
         "ls" is eq 27 as in the paper; "iv" adds two instrumental-variable passes.
     asymmetric : bool
@@ -306,6 +343,8 @@ def identify(
     max_index, rank_tol : see :func:`estimate_indices`.
     input_names, output_names : sequences of str, optional
         Carried into the model and used in error messages.
+    uncertainty : bool
+        Attach the covariance of the free parameters (``model.uncertainty``).
 
     Returns
     -------
@@ -317,76 +356,36 @@ def identify(
     in_names = _names(input_names, np.shape(u)[-1] if np.ndim(u) == 2 else 1, "u")
     out_names = _names(output_names, np.shape(y)[-1] if np.ndim(y) == 2 else 1, "y")
     u, y = check_record(u, y, in_names, out_names)
-    m, p = u.shape[1], y.shape[1]
+    names = (in_names, out_names)
 
     search = None
     if indices is None:
         search = estimate_indices(u, y, max_index, rank_tol, asymmetric, out_names, in_names)
-        indices = search.indices
-    structure = AlphaStructure.from_indices(indices)
-    if structure.n_outputs != p:
-        raise ValueError(f"{len(structure.indices)} observability indices given for {p} outputs")
-
-    gamma = _binary_amplitudes(u, in_names) if asymmetric else np.full(m, np.nan)
-    feats = _input_features(u, gamma, asymmetric)
-    n_feat = feats.shape[1]
-    start = max(structure.indices)
-    n_params = max(len(structure.free_output_lags(i)) + start * n_feat + 1 for i in range(p))
-    if u.shape[0] - start < 2 * n_params:
-        raise ValueError(
-            f"the record has {u.shape[0]} samples; observability indices {list(structure.indices)} "
-            f"need at least {start + 2 * n_params}"
-        )
-
-    phis = [_regressors(structure, i, y, feats, start) for i in range(p)]
-    thetas = []
-    for i, phi in enumerate(phis):
-        theta, _, rank, _ = np.linalg.lstsq(phi, y[start:, i], rcond=None)
-        if rank < phi.shape[1]:
-            raise ValueError(
-                f"the regression for output '{out_names[i]}' is rank-deficient ({rank} of "
-                f"{phi.shape[1]}): the record does not determine indices {list(structure.indices)}"
-            )
-        thetas.append(theta)
-
-    def build(parts: tuple) -> AlphaCanonicalModel:
-        a, b, c, lam, _ = parts
-        return AlphaCanonicalModel(
-            A=a,
-            B=b,
-            C=c,
-            dt=dt,
-            observability_indices=structure.indices,
-            lam=lam,
-            input_names=in_names,
-            output_names=out_names,
-            fit={"method": method, "samples": int(u.shape[0])},
-        )
-
-    parts = _realize(structure, thetas, m, gamma, asymmetric, out_names)
-    model = build(parts)
-    if method == "iv":
-        # Each pass takes the previous model's simulated output as instruments; a pass is kept
-        # only if its model is stable and simulates the record at least as well (weak
-        # instruments can otherwise throw the estimate away from the least-squares one).
-        best, simulated = _simulation_error(model, u, y)
-        for _ in range(2):
-            if simulated is None:  # an unstable start still gives instruments
-                simulated = simulate(model, u, TruthConfig.ideal())[1]
-            thetas = []
-            for i, phi in enumerate(phis):
-                instruments = _regressors(structure, i, simulated, feats, start)
-                thetas.append(
-                    np.linalg.lstsq(instruments.T @ phi, instruments.T @ y[start:, i], rcond=None)[0]
+        fits: dict[tuple[int, ...], _Fit] = {}
+        for cand in search.candidates:
+            try:
+                fits[cand.indices] = _fit(
+                    AlphaStructure.from_indices(cand.indices), u, y, dt, method, asymmetric, names
                 )
-            candidate_parts = _realize(structure, thetas, m, gamma, asymmetric, out_names)
-            candidate = build(candidate_parts)
-            error, candidate_simulated = _simulation_error(candidate, u, y)
-            if not error <= best:
-                break
-            parts, model, best, simulated = candidate_parts, candidate, error, candidate_simulated
-    intercept = parts[4]
-    return Identification(model, search, intercept, method)
+            except ValueError as exc:
+                if cand.indices == search.rank_rule:
+                    raise
+                cand.note = str(exc)
+        use_simulation = fits[search.rank_rule].simulated is not None
+        for cand in search.candidates:
+            if cand.indices in fits:
+                cand.criterion, cand.parameters, cand.rms_error = _criterion(
+                    fits[cand.indices], y, use_simulation
+                )
+        search.criterion = "BIC of the simulation error" if use_simulation else "BIC of the one-step error"
+        ranked = search.ranked()
+        search.indices = ranked[0].indices if ranked else search.rank_rule
+        fit = fits[search.indices]
+    else:
+        fit = _fit(AlphaStructure.from_indices(indices), u, y, dt, method, asymmetric, names)
+    if uncertainty:
+        fit.model.uncertainty = parameter_uncertainty(fit, y, method)
+    return Identification(fit.model, search, fit.intercept, method)
 
 
 def _realize(
@@ -400,6 +399,7 @@ def _realize(
     """(A, B, C, lambda, unexplained intercept) from the per-output regression coefficients."""
     n, p = structure.n_states, structure.n_outputs
     k_gain = np.zeros((n, p))
+    coupling = np.zeros((p, p))  # y_i(k) = sum_j coupling[i, j] y_j(k) + ...: H = (I - coupling)^-1
     b = np.zeros((n, m))
     asym = np.zeros((n, m))  # coefficients of |u| lags (non-binary inputs only)
     nonbinary = np.flatnonzero(np.isnan(gamma)) if asymmetric else np.empty(0, dtype=int)
@@ -407,15 +407,19 @@ def _realize(
     intercept = np.empty(p)
     for i, theta in enumerate(thetas):
         free = structure.free_output_lags(i)
+        coupled = structure.coupled_outputs(i)
         for (j, d), value in zip(free, theta[: len(free)], strict=True):
             k_gain[structure.position(i, d), j] = value
-        u_coef = theta[len(free) : -1].reshape(structure.indices[i], n_feat)
+        coupling[i, coupled] = theta[len(free) : len(free) + len(coupled)]
+        u_coef = theta[len(free) + len(coupled) : -1].reshape(structure.indices[i], n_feat)
         for d in range(structure.indices[i]):
             row = structure.position(i, d)
             b[row] = u_coef[d, :m]
             asym[row, nonbinary] = u_coef[d, m:]
         intercept[i] = theta[-1]
-    c = structure.output_matrix()
+    eye = np.eye(p)
+    h = eye if not coupling.any() else scipy.linalg.solve_triangular(eye - coupling, eye, lower=True)
+    c = structure.output_matrix(h)
     a = structure.shift_matrix() + k_gain @ c
     lam = np.ones(m)
     if asymmetric:

@@ -132,7 +132,8 @@ class StepParameters:
         lam = model.lam - 1.0 if config.asymmetric_gains else np.zeros(model.n_inputs)
         return cls(
             shift_source=tuple(int(np.argmax(row)) if row.any() else -1 for row in a_o),
-            K=model.K,
+            # The last p states are w = H^-1 y; they enter through A's last columns, K H.
+            K=model.A[:, model.A.shape[0] - model.n_outputs :].copy(),
             B=model.B.copy(),
             lam_minus_one=lam,
             half_backlash=0.5 * config.backlash,
@@ -240,6 +241,12 @@ def _column(gain: np.ndarray, j: int) -> np.ndarray:
     return gain[:, j, None] if gain.ndim == 2 else gain[:, j]
 
 
+def output_coupling(model: AlphaCanonicalModel) -> np.ndarray | None:
+    """H of ``C = H [0 I]``, or None when it is the identity (the outputs are the last states)."""
+    h = model.H
+    return None if np.array_equal(h, np.eye(h.shape[0])) else h
+
+
 class EngineCore:
     """N independent engines stepped together (:func:`step_arrays`).
 
@@ -260,6 +267,7 @@ class EngineCore:
         self.config = config
         self.n = n
         self.params = StepParameters.from_model(model, config)
+        self.coupling = output_coupling(model)
         self.x = np.zeros((model.A.shape[0], n))  # state-major: row i is state i of every engine
         self.linkage = np.zeros((model.n_inputs, n))
         self.valve = np.zeros((model.n_inputs, n))
@@ -272,8 +280,9 @@ class EngineCore:
         self.valve[:, engines] = 0.0
 
     def output(self) -> np.ndarray:
-        """Noise-free outputs y = C x (the last p states), shape (n, p)."""
-        return self.x[self.x.shape[0] - self.model.n_outputs :].T.copy()
+        """Noise-free outputs y = C x = H w (w the last p states), shape (n, p)."""
+        w = self.x[self.x.shape[0] - self.model.n_outputs :].T
+        return w.copy() if self.coupling is None else w @ self.coupling.T
 
     def step(self, command: np.ndarray) -> np.ndarray:
         """Advance one sample with valve commands of shape (n, m); returns the valve positions (n, m)."""
@@ -340,6 +349,9 @@ def simulate(
         for k in range(horizon):
             clean[:, k] = core.output()
             core.step(u[:, k])
+    coupling = output_coupling(model)
+    if coupling is not None and n_runs == 1:
+        clean = clean @ coupling.T
     measured = clean.copy()
     if np.any(noise_std > 0):
         measured += noise_std * rng.standard_normal(clean.shape)

@@ -13,6 +13,20 @@ so that the last ``p`` states are the outputs themselves. ``A_o`` shifts ``(i, d
 one-step equation of ``y_i(k)`` (eq 11), and the uniqueness condition (eq 8) forces
 ``K[(i, d), j] = 0`` whenever ``mu_i > mu_j`` and ``d < mu_i - mu_j``.
 
+The paper's form (``H = I`` in ``C = H [0 I]``) covers the systems in which no output's
+dependent row ``c_i A^mu_i`` draws on a row ``c_j A^mu_i`` of the same power. The row search
+examines ``c_j A^mu_i`` before ``c_i A^mu_i`` whenever ``j < i`` and ``mu_j > mu_i``, so a
+general system with these indices may use it: in the one-step equation, ``y_i(k)`` then
+depends on ``y_j(k)`` itself. Those couplings are the free entries ``H[i, j]`` of a unit lower
+triangular ``H`` (``j < i``, ``mu_j > mu_i``); with them
+
+    x(k+1) = (A_o + K C) x(k) + B u*(k),   y(k) = C x(k),   C = H [0 I],
+
+the last ``p`` states are ``w = H^-1 y`` and every system whose row search (power by power,
+outputs in order) finds ``mu`` has exactly one such realization. For indices in which no
+``j < i`` has ``mu_j > mu_i`` (equal indices, as Table I's (2, 2), or non-decreasing ones)
+``H = I`` and the form is the paper's.
+
 ``u*`` is the input after the piecewise-linear gain of eq 36: ``lambda_i u_i`` for
 ``u_i >= 0`` and ``(2 - lambda_i) u_i`` for ``u_i < 0``.
 """
@@ -27,9 +41,14 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import scipy.linalg
+
+from ssme_envs.models.uncertainty import ParameterUncertainty
 
 ENGINE_MODEL_SCHEMA = "ssme-envs/engine-model"
-ENGINE_MODEL_SCHEMA_VERSION = 1
+# Version 2 added C = H [0 I] and the optional ``uncertainty`` block; version 1 files still load.
+ENGINE_MODEL_SCHEMA_VERSION = 2
+SUPPORTED_ENGINE_SCHEMA_VERSIONS = (1, 2)
 
 
 @dataclass(frozen=True)
@@ -75,11 +94,24 @@ class AlphaStructure:
                 a_o[self.position(i, d - 1), row] = 1.0
         return a_o
 
-    def output_matrix(self) -> np.ndarray:
-        """C = [0 I]."""
+    def output_matrix(self, h: np.ndarray | None = None) -> np.ndarray:
+        """C = H [0 I] (H = I when not given)."""
         c = np.zeros((self.n_outputs, self.n_states))
-        c[:, self.n_states - self.n_outputs :] = np.eye(self.n_outputs)
+        c[:, self.n_states - self.n_outputs :] = np.eye(self.n_outputs) if h is None else h
         return c
+
+    def coupled_outputs(self, output: int) -> list[int]:
+        """Outputs ``j`` whose current sample enters the equation of ``output`` (free ``H[output, j]``):
+        those searched before it (``j < output``) with a longer chain."""
+        return [j for j in range(output) if self.indices[j] > self.indices[output]]
+
+    def free_parameters(self) -> list[tuple[str, int, int]]:
+        """The free entries of K and H, in the order of each output's regression: (matrix, row, col)."""
+        out = []
+        for i in range(self.n_outputs):
+            out += [("K", self.position(i, d), j) for j, d in self.free_output_lags(i)]
+            out += [("H", i, j) for j in self.coupled_outputs(i)]
+        return out
 
     def free_output_lags(self, output: int) -> list[tuple[int, int]]:
         """(output j, depth d) pairs whose K entry is free in the row chain of ``output`` (eq 8)."""
@@ -146,6 +178,8 @@ class AlphaCanonicalModel:
         Column names of the record the model describes.
     fit : dict
         Fit figures (SEE, NRMSE) and provenance; free-form, JSON-serializable.
+    uncertainty : ParameterUncertainty, optional
+        Covariance of the free parameters (:meth:`parameter_names`) from the identification.
     """
 
     A: np.ndarray
@@ -157,6 +191,7 @@ class AlphaCanonicalModel:
     input_names: tuple[str, ...] = ("beta_opov", "beta_fpov")
     output_names: tuple[str, ...] = ("pc", "mr")
     fit: dict[str, Any] = field(default_factory=dict)
+    uncertainty: ParameterUncertainty | None = None
 
     def __post_init__(self) -> None:
         self.A = as_matrix(self.A, "A", (None, None))
@@ -190,9 +225,56 @@ class AlphaCanonicalModel:
         return AlphaStructure.from_indices(self.observability_indices)
 
     @property
+    def H(self) -> np.ndarray:
+        """The output coupling of ``C = H [0 I]`` (identity in the paper's form)."""
+        return self.C[:, self.A.shape[0] - self.C.shape[0] :].copy()
+
+    @property
     def K(self) -> np.ndarray:
-        """Output-injection (deadbeat observer) gain: the last p columns of A."""
-        return self.A[:, self.A.shape[0] - self.C.shape[0] :].copy()
+        """Output-injection (deadbeat observer) gain: ``A = A_o + K C``, so the last p columns of A
+        are ``K H``."""
+        last = self.A[:, self.A.shape[0] - self.C.shape[0] :]
+        h = self.H
+        if np.array_equal(h, np.eye(h.shape[0])):
+            return last.copy()
+        return scipy.linalg.solve_triangular(h, last.T, trans="T", lower=True, unit_diagonal=True).T
+
+    def parameter_names(self) -> list[str]:
+        """Names of the free parameters: K and H entries the form leaves free, all of B, lambda."""
+        names = [f"{mat}[{r},{c}]" for mat, r, c in self.structure.free_parameters()]
+        names += [f"B[{r},{c}]" for r in range(self.B.shape[0]) for c in range(self.B.shape[1])]
+        return names + [f"lambda[{j}]" for j in range(self.n_inputs)]
+
+    def parameter_vector(self) -> np.ndarray:
+        """The free parameters' values, in the order of :meth:`parameter_names`."""
+        mats = {"K": self.K, "H": self.H}
+        free = [mats[mat][r, c] for mat, r, c in self.structure.free_parameters()]
+        return np.concatenate([free, self.B.ravel(), self.lam])
+
+    def with_parameters(self, values: np.ndarray) -> AlphaCanonicalModel:
+        """The same structure with other free-parameter values (e.g. a draw from the uncertainty)."""
+        values = np.asarray(values, dtype=float)
+        s = self.structure
+        free = s.free_parameters()
+        if values.shape != (len(free) + self.B.size + self.n_inputs,):
+            raise ValueError(
+                f"expected {len(free) + self.B.size + self.n_inputs} parameters, got {values.shape}"
+            )
+        k_gain, h = np.zeros_like(self.K), np.eye(self.n_outputs)
+        for (mat, r, c), v in zip(free, values, strict=False):
+            (k_gain if mat == "K" else h)[r, c] = v
+        c_mat = s.output_matrix(h)
+        b = values[len(free) : len(free) + self.B.size].reshape(self.B.shape)
+        return AlphaCanonicalModel(
+            A=s.shift_matrix() + k_gain @ c_mat,
+            B=b,
+            C=c_mat,
+            dt=self.dt,
+            observability_indices=self.observability_indices,
+            lam=values[len(free) + self.B.size :],
+            input_names=self.input_names,
+            output_names=self.output_names,
+        )
 
     @property
     def n_inputs(self) -> int:
@@ -220,10 +302,14 @@ class AlphaCanonicalModel:
         return self.C @ np.linalg.solve(np.eye(n) - self.A, self.B)
 
     def alpha_canonical_residual(self) -> float:
-        """Largest violation of eqs 5-8 (0 for a model exactly in alpha-canonical form)."""
+        """Largest violation of eqs 5-8 with ``C = H [0 I]`` (0 for a model exactly in the form)."""
         s = self.structure
         a_o = s.shift_matrix()
-        errs = [np.max(np.abs(self.C - s.output_matrix())), np.max(np.abs(self.A - a_o - self.K @ self.C))]
+        h = np.eye(s.n_outputs)
+        for i in range(s.n_outputs):
+            for j in s.coupled_outputs(i):
+                h[i, j] = self.C[i, s.n_states - s.n_outputs + j]
+        errs = [np.max(np.abs(self.C - s.output_matrix(h))), np.max(np.abs(self.A - a_o - self.K @ self.C))]
         for i in range(s.n_outputs):
             free = set(s.free_output_lags(i))
             for d in range(s.indices[i]):
@@ -245,6 +331,7 @@ class AlphaCanonicalModel:
             "input_names": list(self.input_names),
             "output_names": list(self.output_names),
             "fit": self.fit,
+            **({"uncertainty": self.uncertainty.to_dict()} if self.uncertainty is not None else {}),
         }
 
     @classmethod
@@ -256,7 +343,7 @@ class AlphaCanonicalModel:
         if schema != ENGINE_MODEL_SCHEMA:
             raise ValueError(f"{source}: schema is {schema!r}, expected {ENGINE_MODEL_SCHEMA!r}")
         version = data.get("schema_version", ENGINE_MODEL_SCHEMA_VERSION)
-        if version != ENGINE_MODEL_SCHEMA_VERSION:
+        if version not in SUPPORTED_ENGINE_SCHEMA_VERSIONS:
             raise ValueError(f"{source}: unsupported schema_version {version!r}")
         missing = [k for k in ("dt", "A", "B", "C", "observability_indices", "lambda") if k not in data]
         if missing:
@@ -296,6 +383,10 @@ class AlphaCanonicalModel:
             raise ValueError(
                 f"{source}: (A, C) is not in alpha-canonical form for observability indices "
                 f"{list(model.observability_indices)} (largest violation of eqs 5-8: {residual:.3g})"
+            )
+        if data.get("uncertainty") is not None:
+            model.uncertainty = ParameterUncertainty.from_dict(
+                data["uncertainty"], model.parameter_names(), source
             )
         return model
 

@@ -1,0 +1,69 @@
+"""Covariance of identified alpha-canonical parameters.
+
+Each output's equation ``y_i(k) = phi_i(k) theta_i + v_i(k)`` is solved by least squares or by
+instrumental variables with instruments ``z_i`` (least squares: ``z_i = phi_i``). The estimate's
+covariance is the sandwich
+
+    cov(theta) = G^-1 S G^-T,   G = blockdiag(z_i^T phi_i),   S = sum_{|l| <= L} sum_k g(k) g(k-l)^T,
+
+with ``g(k)`` the stacked ``z_i(k) v_i(k)`` of all outputs. The sum over lags is there because the
+equation error is not white: with white noise ``e`` on the measured outputs,
+``v_i(k) = e_i(k) - sum_d K e(k-1-d)`` is a moving average of order ``mu_i``, and the outputs'
+errors are correlated with each other, so ``L = max(mu)`` and the cross terms are kept (a
+heteroscedasticity and autocorrelation consistent estimate with the lag window the model
+implies). The model's free parameters (K, H, B, lambda) are functions of the stacked theta;
+their covariance follows by the delta method.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+import scipy.linalg
+
+from ssme_envs.models.uncertainty import ParameterUncertainty, jacobian
+
+if TYPE_CHECKING:
+    from ssme_envs.identification.alpha_canonical import _Fit
+
+
+def theta_covariance(
+    phis: list[np.ndarray], instruments: list[np.ndarray], residuals: list[np.ndarray], lags: int
+) -> np.ndarray:
+    """Sandwich covariance of the stacked per-output estimates (see the module docstring)."""
+    g = np.hstack([z * v[:, None] for z, v in zip(instruments, residuals, strict=True)])
+    meat = g.T @ g
+    for lag in range(1, lags + 1):
+        cross = g[lag:].T @ g[:-lag]
+        meat += cross + cross.T
+    # The window's sum is not positive semi-definite on every record; its negative part is noise.
+    values, vectors = np.linalg.eigh(0.5 * (meat + meat.T))
+    meat = (vectors * np.clip(values, 0.0, None)) @ vectors.T
+    bread = scipy.linalg.block_diag(
+        *[np.linalg.inv(z.T @ phi) for z, phi in zip(instruments, phis, strict=True)]
+    )
+    n, k = g.shape[0], g.shape[1]
+    cov = bread @ meat @ bread.T * (n / max(n - k / len(phis), 1))
+    return 0.5 * (cov + cov.T)
+
+
+def parameter_uncertainty(fit: _Fit, y: np.ndarray, method: str) -> ParameterUncertainty:
+    """Covariance of the fitted model's free parameters (K, H, B, lambda) from its regression."""
+    residuals = fit.residuals(y)
+    lags = max(fit.model.observability_indices)
+    cov_theta = theta_covariance(fit.phis, fit.instruments, residuals, lags)
+    sizes = np.cumsum([th.size for th in fit.thetas])[:-1]
+
+    def parameters(flat: np.ndarray) -> np.ndarray:
+        return fit.build(np.split(flat, sizes))[0].parameter_vector()
+
+    jac = jacobian(parameters, np.concatenate(fit.thetas))
+    cov = jac @ cov_theta @ jac.T
+    return ParameterUncertainty(
+        tuple(fit.model.parameter_names()),
+        0.5 * (cov + cov.T),
+        method=f"{'instrumental variables' if method == 'iv' else 'least squares'}, sandwich covariance "
+        f"with {lags} lags of the equation error, delta method to the model parameters",
+        samples=int(y.shape[0]),
+    )

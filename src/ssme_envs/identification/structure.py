@@ -1,0 +1,227 @@
+"""Observability indices: the row-by-row rank search (NASA TM-104422, eqs 28-33) and its neighbours.
+
+The past outputs ``Q`` (lags ``1..L`` of every output), after their projection on the lagged
+inputs ``R`` is removed, span the same row space as the observability matrix (``Q_o = V M V^T``,
+eq 31). A row-by-row search over ``C``, ``CA``, ``CA^2``, ... (power by power, outputs in order)
+keeps each output's next row while it adds a new direction; the number of rows kept for output
+``i`` is ``mu_i``. The projections come from one QR factorization of ``[R Z Q]`` (never from
+inverting ``R R^T``). ``Z`` holds older inputs: projecting ``Q`` on them as instruments removes
+white measurement noise, so dependent rows shrink towards zero as the record grows while
+independent ones do not.
+
+Decision rule: a candidate row is independent when the norm of its component orthogonal to the
+rows already kept exceeds ``rank_tol`` (default 0.1) times its own norm. Noise-free data give
+ratios near 1e-15 for dependent rows. With noise, a dependent row's ratio grows with the
+noise-to-signal ratio over sqrt(N) (about 0.02 for 5 % noise on 1000 samples of the Table I
+models), and a weakly observable mode's independent row can sit as low: no threshold separates
+the two on every record. So the search also returns the index sets one decision away (the
+nearest ratios on either side of the threshold, re-searched with the threshold moved past them),
+and :func:`ssme_envs.identification.alpha_canonical.identify` chooses among them by a
+criterion on the fitted models.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.linalg
+
+DEFAULT_MAX_INDEX = 6
+DEFAULT_RANK_TOL = 0.1
+# Ratios below this are round-off (noise-free dependent rows): never a candidate decision.
+RATIO_FLOOR = 1e-6
+# Neighbours searched: decisions turned to "independent" (larger models) and to "dependent".
+STEPS_DOWN = 2
+STEPS_UP = 1
+
+
+@dataclass
+class Candidate:
+    """One index set and how its fitted model scored (lower criterion is better)."""
+
+    indices: tuple[int, ...]
+    criterion: float = float("nan")
+    parameters: int = 0
+    rms_error: tuple[float, ...] = ()
+    note: str = ""
+
+
+@dataclass
+class StructureSearch:
+    """Outcome of the row-by-row rank search and of the choice among its neighbours.
+
+    Attributes
+    ----------
+    indices : tuple of int
+        The chosen observability indices (the rank rule's unless a neighbour scored better).
+    ratios : list of (output, power, ratio, kept)
+        For each candidate row ``c_output A^power`` examined at ``rank_tol``: the norm of its new
+        component over its norm, and whether it was kept.
+    rank_rule : tuple of int
+        The indices the rank rule alone gives at ``rank_tol``.
+    candidates : list of Candidate
+        Every index set compared, the rank rule's first.
+    criterion : str
+        What the candidates' ``criterion`` is.
+    """
+
+    indices: tuple[int, ...]
+    ratios: list[tuple[int, int, float, bool]] = field(default_factory=list)
+    rank_rule: tuple[int, ...] = ()
+    candidates: list[Candidate] = field(default_factory=list)
+    criterion: str = ""
+
+    def ranked(self) -> list[Candidate]:
+        """Candidates that could be fitted, best first."""
+        ok = [c for c in self.candidates if np.isfinite(c.criterion)]
+        return sorted(ok, key=lambda c: c.criterion)
+
+    @property
+    def runner_up(self) -> Candidate | None:
+        ranked = self.ranked()
+        return ranked[1] if len(ranked) > 1 else None
+
+    @property
+    def margin(self) -> float:
+        """Criterion of the runner-up minus the chosen one's (inf when there is no runner-up)."""
+        ranked = self.ranked()
+        return ranked[1].criterion - ranked[0].criterion if len(ranked) > 1 else float("inf")
+
+
+def lagged(x: np.ndarray, lags: Sequence[int], start: int) -> np.ndarray:
+    """Columns ``x[k - lag]`` for k = start..T-1, for each lag and each channel (lag-major)."""
+    horizon = x.shape[0]
+    if not lags:
+        return np.empty((horizon - start, 0))
+    return np.hstack([x[start - lag : horizon - lag] for lag in lags])
+
+
+def instrumented_rows(feats: np.ndarray, y: np.ndarray, window: int, max_index: int) -> np.ndarray:
+    """The past outputs with the window's inputs removed, projected on older inputs (orthonormal
+    coordinates): column ``k p + i`` carries the row ``c_i A^k``.
+
+    Raises
+    ------
+    ValueError
+        For a record too short for the window, or inputs not persistently exciting.
+    """
+    horizon, p = y.shape
+    n_feat = feats.shape[1]
+    start = 2 * window
+    needed = (window * n_feat + 1) + window * n_feat + window * p
+    if horizon - start < 2 * needed:
+        raise ValueError(
+            f"the record has {horizon} samples; a structure search up to index {max_index} needs at "
+            f"least {start + 2 * needed} (use a longer record or a smaller max_index)"
+        )
+    r_block = np.hstack([lagged(feats, range(1, window + 1), start), np.ones((horizon - start, 1))])
+    z_block = lagged(feats, range(window + 1, 2 * window + 1), start)
+    q_block = lagged(y, range(window, 0, -1), start)
+    n_r, n_z = r_block.shape[1], z_block.shape[1]
+    tri = scipy.linalg.qr(np.hstack([r_block, z_block, q_block]), mode="r", check_finite=False)[0]
+    diag = np.abs(np.diag(tri)[: n_r + n_z])
+    if diag.min() < 1e-9 * diag.max():
+        raise ValueError(
+            f"the inputs are not persistently exciting over {2 * window} lags (the lagged-input "
+            "matrix is rank-deficient): use a richer input such as a PRBS"
+        )
+    return tri[n_r : n_r + n_z, n_r + n_z :]
+
+
+def rank_search(
+    rows: np.ndarray, p: int, rank_tol: float, flipped: frozenset[tuple[int, int]] = frozenset()
+) -> tuple[tuple[int, ...], list[tuple[int, int, float, bool]], bool]:
+    """The greedy row search: (indices, ratios, some chain still open at the window's end).
+
+    ``flipped`` rows ``(output, power)`` get the decision opposite to the threshold's.
+    """
+    window = rows.shape[1] // p
+    basis = np.empty((rows.shape[0], 0))
+    active = [True] * p
+    indices = [0] * p
+    ratios: list[tuple[int, int, float, bool]] = []
+    for power in range(window):
+        for i in range(p):
+            if not active[i]:
+                continue
+            col = rows[:, power * p + i]
+            norm = np.linalg.norm(col)
+            resid = col - basis @ (basis.T @ col)
+            ratio = float(np.linalg.norm(resid) / norm) if norm > 0 else 0.0
+            kept = (ratio > rank_tol) != ((i, power) in flipped)
+            ratios.append((i, power, ratio, kept))
+            if kept and ratio > 0:
+                basis = np.column_stack([basis, resid / np.linalg.norm(resid)])
+                indices[i] += 1
+            else:
+                active[i] = False
+    return tuple(indices), ratios, any(active)
+
+
+def neighbours(rows: np.ndarray, p: int, rank_tol: float) -> list[tuple[int, ...]]:
+    """Valid index sets one and two decisions away from the rank rule's: the nearest cut rows
+    kept (larger models, up to ``STEPS_DOWN``) and the nearest kept row cut (``STEPS_UP``)."""
+    found: list[tuple[int, ...]] = []
+    for direction, steps in ((-1, STEPS_DOWN), (+1, STEPS_UP)):
+        flipped: frozenset[tuple[int, int]] = frozenset()
+        for _ in range(steps):
+            _, ratios, _ = rank_search(rows, p, rank_tol, flipped)
+            if direction < 0:
+                options = [(r, i, k) for i, k, r, kept in ratios if not kept and r > RATIO_FLOOR]
+                pick = max(options, default=None)
+            else:
+                options = [(r, i, k) for i, k, r, kept in ratios if kept and k > 0 and (i, k) not in flipped]
+                pick = min(options, default=None)
+            if pick is None:
+                break
+            flipped = flipped | {(pick[1], pick[2])}
+            indices, _, open_chain = rank_search(rows, p, rank_tol, flipped)
+            if not open_chain and min(indices) > 0 and indices not in found:
+                found.append(indices)
+    return found
+
+
+def estimate_indices(
+    feats: np.ndarray,
+    y: np.ndarray,
+    max_index: int = DEFAULT_MAX_INDEX,
+    rank_tol: float = DEFAULT_RANK_TOL,
+    output_names: Sequence[str] | None = None,
+) -> StructureSearch:
+    """Observability indices by the row-by-row rank search on Q_o (eqs 28-33), and the index sets
+    one decision away as ``candidates``.
+
+    Parameters
+    ----------
+    feats, y : arrays, shapes (T, m'), (T, p)
+        Input features (the inputs, plus |u| of non-binary inputs when lambda is estimated) and
+        outputs, already checked.
+    max_index : int
+        Largest observability index searched (the lag window L).
+    rank_tol : float
+        Relative norm below which a candidate row counts as dependent.
+    output_names : sequence of str, optional
+        Used in error messages.
+    """
+    if max_index < 1:
+        raise ValueError(f"max_index must be >= 1, got {max_index}")
+    if not 0 < rank_tol < 1:
+        raise ValueError(f"rank_tol must be in (0, 1), got {rank_tol}")
+    p = y.shape[1]
+    names = list(output_names) if output_names is not None else [f"y{i}" for i in range(p)]
+    rows = instrumented_rows(feats, y, max_index, max_index)
+    indices, ratios, _ = rank_search(rows, p, rank_tol)
+    for i in range(p):
+        if indices[i] == 0:
+            raise ValueError(
+                f"output '{names[i]}' adds nothing to the earlier outputs (C is not of full row rank)"
+            )
+        if ratios and any(r[0] == i and r[1] == max_index - 1 and r[3] for r in ratios):
+            raise ValueError(
+                f"the observability index of output '{names[i]}' exceeds max_index={max_index}: raise "
+                "max_index, or the data may be too noisy for the rank tolerance"
+            )
+    candidates = [Candidate(indices)] + [Candidate(c) for c in neighbours(rows, p, rank_tol) if c != indices]
+    return StructureSearch(indices, ratios, indices, candidates)
