@@ -7,14 +7,15 @@ controller on every env, write one report.md. ``ssme-envs evaluate --env ID --co
 Bouc-Wen). ``ssme-envs identify engine [--data FILE.csv] --out DIR`` identifies an alpha-canonical engine
 model from a record, or, without ``--data``, runs the embedded experiment on the truth at the
 five Table I power levels. ``ssme-envs validate engine --model model.json --data FILE.csv
---out DIR`` scores a model on records. Errors in what the user gave print one line ``error: ...`` and exit
-with code 2.
+[--data FILE.csv ...] --out DIR`` scores a model on records. Errors in what the user gave print one
+line ``error: ...`` and exit with code 2.
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib.util
+import math
 import sys
 import time
 from collections.abc import Sequence
@@ -163,7 +164,14 @@ def build_parser() -> argparse.ArgumentParser:
         "engine", help="SEE, fit and plots of an engine model.json on CSV records"
     )
     check_engine.add_argument("--model", type=Path, required=True, help="engine model.json")
-    check_engine.add_argument("--data", type=Path, required=True, nargs="+", help="CSV record(s)")
+    check_engine.add_argument(
+        "--data",
+        type=Path,
+        required=True,
+        nargs="+",
+        action="extend",
+        help="CSV record(s); repeat --data or list several",
+    )
     check_engine.add_argument("--out", type=Path, required=True, help="output directory")
     check_engine.add_argument("--dt", type=float, help="sample time in s, if the CSV has no 't' column")
     return parser
@@ -180,7 +188,28 @@ def _check_same_dt(path: Path, dt: float, reference: float, what: str) -> None:
         raise ValueError(f"{path}: sample time {dt:g} s differs from the {what}'s {reference:g} s")
 
 
+def _check_record(path: Path, record) -> None:
+    """Refuse a record on which SEE or fit cannot be computed (zero, constant, huge, NaN)."""
+    from ssme_envs.identification.records import check_validation_record
+
+    check_validation_record(record.u, record.y, record.input_names, record.output_names, path)
+
+
+def _check_scores(path: Path, scores: dict, output_names: Sequence[str]) -> None:
+    """Refuse SEE or fit values that came out NaN or inf (the model's prediction overflowed)."""
+    for predictor, figures in scores.items():
+        for metric, values in figures.items():
+            for name, value in zip(output_names, values, strict=True):
+                if not math.isfinite(value):
+                    raise ValueError(
+                        f"{path}: the {predictor}'s {metric} for output '{name}' is {value} "
+                        "(its prediction overflows on this record)"
+                    )
+
+
 def _identify_engine(args: argparse.Namespace) -> int:
+    import numpy as np
+
     from ssme_envs.identification import pipeline, report
     from ssme_envs.identification.metrics import validate
     from ssme_envs.models.engine import TruthConfig
@@ -208,6 +237,8 @@ def _identify_engine(args: argparse.Namespace) -> int:
             for name, rec in r.records.items():
                 pipeline.write_record(out / "data" / f"engine_{r.power_percent}_{name}.csv", rec)
             see = r.validation["validation_low_frequency"]["model"]["see"]
+            if r.identified.search is not None and r.identified.search.close:
+                print(f"{r.power_percent:>3d} % power: {r.identified.search.summary()}")
             print(
                 f"{r.power_percent:>3d} % power: indices {list(r.identified.model.observability_indices)}, "
                 f"lambda {[round(float(v), 4) for v in r.identified.model.lam]}, model SEE on the "
@@ -227,19 +258,27 @@ def _identify_engine(args: argparse.Namespace) -> int:
         raise _UsageError("--seed applies to the embedded experiment only (no --data)")
     inputs, outputs = _names(args.inputs, "--inputs"), _names(args.outputs, "--outputs")
     record = pipeline.read_record(args.data, inputs, outputs, args.dt)
+    _check_record(args.data, record)
+    check = None
+    if args.validate is not None:  # refuse a bad validation record before the identification runs
+        check = pipeline.read_record(args.validate, inputs, outputs, args.dt)
+        _check_same_dt(args.validate, check.dt, record.dt, "data")
+        _check_record(args.validate, check)
     ident = pipeline.identify_record(record, **options)
     records = {"identification": record}
     validation = {"identification": ident.model.fit["identification_record"]}
-    if args.validate is not None:
-        check = pipeline.read_record(args.validate, inputs, outputs, args.dt)
-        _check_same_dt(args.validate, check.dt, record.dt, "data")
+    if check is not None:
         records["validation"] = check
-        validation["validation"] = validate(ident.model, check.u, check.y)
+        with np.errstate(all="ignore"):  # an overflow is refused just below, without warnings
+            validation["validation"] = validate(ident.model, check.u, check.y)
+        _check_scores(args.validate, validation["validation"], outputs)
         ident.model.fit["validation_record"] = validation["validation"]
     ident.model.fit["data"] = str(args.data)
     ident.model.save(out / "model.json")
     path = report.write_record_report(out, ident.model, records, validation, ident, args.rank_tol)
     model = ident.model
+    if ident.search is not None:
+        print(ident.search.summary())
     print(
         f"indices {list(model.observability_indices)}, lambda {[round(float(v), 4) for v in model.lam]}, "
         f"model SEE {[round(v, 4) for v in validation['identification']['model']['see']]}"
@@ -418,19 +457,29 @@ def _report(args: argparse.Namespace) -> int:
 
 
 def _validate_engine(args: argparse.Namespace) -> int:
+    import numpy as np
+
     from ssme_envs.identification import pipeline, report
     from ssme_envs.identification.metrics import validate
+    from ssme_envs.identification.records import record_labels
     from ssme_envs.models.statespace import AlphaCanonicalModel
 
     model = AlphaCanonicalModel.load(args.model)
-    records, validation = {}, {}
-    for path in args.data:
+    labels = record_labels(args.data)  # two files called run.csv become run and run_2
+    records = {}
+    for path, label in zip(args.data, labels, strict=True):  # every record is read and checked first
         record = pipeline.read_record(path, model.input_names, model.output_names, args.dt)
         _check_same_dt(path, record.dt, model.dt, "model")
-        records[path.stem] = record
-        validation[path.stem] = validate(model, record.u, record.y)
-        see = [round(v, 5) for v in validation[path.stem]["model"]["see"]]
-        print(f"{path.name}: model SEE {see}")
+        _check_record(path, record)
+        records[label] = record
+    validation = {}
+    for path, label in zip(args.data, labels, strict=True):
+        with np.errstate(all="ignore"):  # an overflow is refused just below, without warnings
+            validation[label] = validate(model, records[label].u, records[label].y)
+        _check_scores(path, validation[label], model.output_names)
+        see = [round(v, 5) for v in validation[label]["model"]["see"]]
+        named = "" if label == path.stem else f" (reported as {label})"
+        print(f"{path}{named}: model SEE {see}")
     _make_dir(args.out)
     print(f"report: {report.write_record_report(args.out, model, records, validation)}")
     return 0

@@ -47,15 +47,19 @@ from ssme_envs.identification.covariance import parameter_uncertainty
 from ssme_envs.identification.structure import (
     DEFAULT_MAX_INDEX,
     DEFAULT_RANK_TOL,
+    Candidate,
     StructureSearch,
+    explore,
     lagged,
 )
 from ssme_envs.identification.structure import estimate_indices as structure_search
 from ssme_envs.models.engine import TruthConfig, simulate
-from ssme_envs.models.statespace import AlphaCanonicalModel, AlphaStructure, check_dt
+from ssme_envs.models.statespace import AlphaCanonicalModel, AlphaStructure, asymmetric_gain, check_dt
 
 # Simulation errors below this fraction of an output's spread are round-off (exact fits).
 CRITERION_FLOOR = 1e-10
+# Simulated outputs beyond this cannot serve as instruments (their squares overflow).
+OVERFLOW_GUARD = 1e100
 
 
 @dataclass
@@ -197,8 +201,23 @@ def _simulation_error(
     an unstable model."""
     if model.spectral_radius() >= 1.0:
         return float("inf"), None
-    simulated = simulate(model, u, TruthConfig.ideal())[1]
+    simulated = linear_response(model, u)
     return float(np.sum((y - simulated) ** 2)), simulated
+
+
+def linear_response(model: AlphaCanonicalModel, u: np.ndarray) -> np.ndarray:
+    """Zero-state response to ``u`` (eq 36 applied), by transfer-function filters (compiled loops:
+    the identification simulates every candidate model several times)."""
+    import scipy.signal  # heavy import, needed only here
+
+    u_star = asymmetric_gain(u, model.lam)
+    out = np.zeros((u.shape[0], model.n_outputs))
+    d = np.zeros((model.n_outputs, 1))
+    for j in range(model.n_inputs):
+        num, den = scipy.signal.ss2tf(model.A, model.B[:, j : j + 1], model.C, d)
+        for i in range(model.n_outputs):
+            out[:, i] += scipy.signal.lfilter(num[i], den, u_star[:, j])
+    return out
 
 
 @dataclass
@@ -278,13 +297,18 @@ def _fit(
         # instruments can otherwise throw the estimate away from the least-squares one).
         for _ in range(2):
             source = fit.simulated
-            if source is None:  # an unstable start still gives instruments
-                source = simulate(fit.model, u, TruthConfig.ideal())[1]
+            if source is None:  # an unstable start still gives instruments, unless it overflows
+                with np.errstate(over="ignore", invalid="ignore"):
+                    source = simulate(fit.model, u, TruthConfig.ideal())[1]
+                if not np.all(np.isfinite(source)) or np.max(np.abs(source)) > OVERFLOW_GUARD:
+                    break
             instruments = [_regressors(structure, i, source, feats, start) for i in range(p)]
-            thetas = [
-                np.linalg.lstsq(z.T @ phi, z.T @ y[start:, i], rcond=None)[0]
-                for i, (z, phi) in enumerate(zip(instruments, phis, strict=True))
-            ]
+            # (Z^T Phi) theta = Z^T y, solved through Z's orthonormal basis Q (Z = Q R): the
+            # same estimate, without squaring Phi's condition number.
+            thetas = []
+            for i, (z, phi) in enumerate(zip(instruments, phis, strict=True)):
+                q = np.linalg.qr(z)[0]
+                thetas.append(np.linalg.lstsq(q.T @ phi, q.T @ y[start:, i], rcond=None)[0])
             candidate, intercept = build(thetas)
             error, candidate_simulated = _simulation_error(candidate, u, y)
             if not error <= best:
@@ -362,27 +386,32 @@ def identify(
     if indices is None:
         search = estimate_indices(u, y, max_index, rank_tol, asymmetric, out_names, in_names)
         fits: dict[tuple[int, ...], _Fit] = {}
-        for cand in search.candidates:
+        first = search.candidates[0].indices
+        fits[first] = _fit(AlphaStructure.from_indices(first), u, y, dt, method, asymmetric, names)
+        use_simulation = fits[first].simulated is not None
+
+        def score(indices: tuple[int, ...]) -> Candidate:
+            cand = Candidate(indices, criterion=float("inf"))
             try:
-                fits[cand.indices] = _fit(
-                    AlphaStructure.from_indices(cand.indices), u, y, dt, method, asymmetric, names
-                )
+                if indices not in fits:
+                    fits[indices] = _fit(
+                        AlphaStructure.from_indices(indices), u, y, dt, method, asymmetric, names
+                    )
             except ValueError as exc:
-                if cand.indices == search.rank_rule:
-                    raise
                 cand.note = str(exc)
-        use_simulation = fits[search.rank_rule].simulated is not None
-        for cand in search.candidates:
-            if cand.indices in fits:
-                cand.criterion, cand.parameters, cand.rms_error = _criterion(
-                    fits[cand.indices], y, use_simulation
-                )
+                return cand
+            cand.criterion, cand.parameters, cand.rms_error = _criterion(fits[indices], y, use_simulation)
+            if not np.isfinite(cand.criterion):
+                cand.note = "the fitted model is unstable"
+            return cand
+
+        explore(search, score)
         search.criterion = "BIC of the simulation error" if use_simulation else "BIC of the one-step error"
-        ranked = search.ranked()
-        search.indices = ranked[0].indices if ranked else search.rank_rule
         fit = fits[search.indices]
     else:
         fit = _fit(AlphaStructure.from_indices(indices), u, y, dt, method, asymmetric, names)
+    if search is not None:
+        fit.model.fit["structure"] = search.to_dict()
     if uncertainty:
         fit.model.uncertainty = parameter_uncertainty(fit, y, method)
     return Identification(fit.model, search, fit.intercept, method)

@@ -72,6 +72,108 @@ def plot_structure_search(path: Path, ident: Identification, rank_tol: float) ->
     plt.close(fig)
 
 
+BAND_DRAWS = 200  # models drawn from the parameter covariance for the 95 % bands
+BAND_SEED = 0
+
+
+def _step_and_frequency(model: AlphaCanonicalModel, steps: int, freqs: np.ndarray):
+    """Step responses to a positive unit step of each input (eq 36 applied), shape (steps, p, m),
+    and gains |G(e^{i w dt})| of the linear part, shape (len(freqs), p, m)."""
+    markov = model.markov_parameters(steps) * model.lam
+    step = np.concatenate([np.zeros((1, *markov.shape[1:])), np.cumsum(markov, axis=0)[:-1]])
+    z = np.exp(1j * 2 * np.pi * freqs * model.dt)
+    eye = np.eye(model.A.shape[0])
+    gain = np.array([np.abs(model.C @ np.linalg.solve(zk * eye - model.A, model.B)) for zk in z])
+    return step, gain
+
+
+def plot_response_bands(path: Path, model: AlphaCanonicalModel, title: str) -> None:
+    """Step and frequency responses of the model with 95 % bands from its parameter covariance
+    (``BAND_DRAWS`` models drawn with a fixed seed; percentiles 2.5 and 97.5)."""
+    plt = agg_pyplot()
+    steps = 100
+    freqs = np.logspace(-2, np.log10(0.5 / model.dt), 120)
+    step, gain = _step_and_frequency(model, steps, freqs)
+    draws = model.sample(np.random.default_rng(BAND_SEED), BAND_DRAWS)
+    drawn = [_step_and_frequency(m, steps, freqs) for m in draws]
+    step_band = np.percentile([d[0] for d in drawn], [2.5, 97.5], axis=0)
+    gain_band = np.percentile([d[1] for d in drawn], [2.5, 97.5], axis=0)
+    p, m = model.n_outputs, model.n_inputs
+    fig, axes = plt.subplots(2, p * m, figsize=(3.2 * p * m, 5.2), squeeze=False)
+    t = np.arange(steps) * model.dt
+    for i in range(p):
+        for j in range(m):
+            col = i * m + j
+            name = f"{model.input_names[j]} -> {model.output_names[i]}"
+            ax = axes[0, col]
+            ax.fill_between(t, step_band[0, :, i, j], step_band[1, :, i, j], color="tab:blue", alpha=0.25)
+            ax.plot(t, step[:, i, j], color="tab:blue", lw=1.2)
+            ax.set_title(name, fontsize=9)
+            ax.set_xlabel("time (s)")
+            ax.grid(alpha=0.3)
+            ax = axes[1, col]
+            ax.fill_between(freqs, gain_band[0, :, i, j], gain_band[1, :, i, j], color="tab:red", alpha=0.25)
+            ax.loglog(freqs, gain[:, i, j], color="tab:red", lw=1.2)
+            ax.set_xlabel("frequency (Hz)")
+            ax.grid(alpha=0.3, which="both")
+    axes[0, 0].set_ylabel("unit step response")
+    axes[1, 0].set_ylabel("|G| (linear part)")
+    fig.suptitle(f"{title}: responses with 95 % bands from the parameter covariance")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def parameter_estimates(model: AlphaCanonicalModel) -> dict[str, tuple[float, float]]:
+    """(estimate, standard error) of each parameter the uncertainty block covers."""
+    values = dict(zip(model.parameter_names(), model.parameter_vector(), strict=True))
+    unc = model.uncertainty
+    return {
+        name: (float(values[name]), float(se))
+        for name, se in zip(unc.parameters, unc.standard_errors, strict=True)
+    }
+
+
+def parameter_table(model: AlphaCanonicalModel) -> list[str]:
+    """Markdown rows: each free parameter, its estimate, standard error and relative error."""
+    if model.uncertainty is None:
+        return ["The model carries no parameter covariance."]
+    lines = ["| parameter | estimate | standard error | relative |", "|---|---|---|---|"]
+    for name, (value, se) in parameter_estimates(model).items():
+        rel = f"{se / abs(value):.2%}" if value != 0 else "-"
+        lines.append(f"| {name} | {value:.5g} | {se:.2g} | {rel} |")
+    return lines
+
+
+def uncertainty_section(out_dir: Path, model: AlphaCanonicalModel, stem: str, title: str) -> list[str]:
+    """Report lines with the standard errors and the band figure (written to ``stem``.png)."""
+    if model.uncertainty is None:
+        return []
+    plot_response_bands(out_dir / f"{stem}.png", model, title)
+    return [
+        "Standard errors from the regression's covariance "
+        f"({model.uncertainty.method}); K and H entries as in `model.json` (`K = A[:, n-p:] H^-1`, "
+        "`H = C[:, n-p:]`).",
+        "",
+        *parameter_table(model),
+        "",
+        f"![responses with 95 % bands]({stem}.png)",
+        "",
+    ]
+
+
+def structure_table(search) -> list[str]:
+    """The index sets compared, best first, with their criterion and parameter count."""
+    lines = [f"| indices | {search.criterion or 'criterion'} | parameters | note |", "|---|---|---|---|"]
+    ranked = search.ranked()
+    rest = [c for c in search.candidates if c not in ranked]
+    for c in ranked + rest:
+        crit = f"{c.criterion:.1f}" if np.isfinite(c.criterion) else "not fitted"
+        note = c.note or ("chosen" if c.indices == search.indices else "")
+        lines.append(f"| {list(c.indices)} | {crit} | {c.parameters} | {note} |")
+    return lines
+
+
 def _fmt_matrix(mat: np.ndarray) -> str:
     return "<br>".join("[" + ", ".join(f"{v:.4f}" for v in row) + "]" for row in np.atleast_2d(mat))
 
@@ -122,9 +224,14 @@ def write_record_report(
         *_validation_table(validation, model.output_names),
         "",
     ]
+    if model.uncertainty is not None:
+        lines += ["## Parameter uncertainty", ""]
+        lines += uncertainty_section(out_dir, model, "response_bands", "Identified model")
     if ident is not None and ident.search is not None and rank_tol is not None:
         plot_structure_search(out_dir / "structure_search.png", ident, rank_tol)
-        lines += ["## Structure search", "", "![structure search](structure_search.png)", ""]
+        lines += ["## Structure search", "", ident.search.summary().replace("\n", "\n\n"), ""]
+        lines += structure_table(ident.search)
+        lines += ["", "![structure search](structure_search.png)", ""]
     lines += ["## Measured vs filter vs model", ""]
     for name, rec in records.items():
         png = f"{name}.png"
@@ -202,6 +309,33 @@ def write_default_report(out_dir: Path, results: list[LevelResult], seed: int, t
                     theirs = paper[key][predictor][out].get(str(r.power_percent))
                     cells.append(f"{theirs:.4g} / {ours:.4g}" if theirs is not None else f"- / {ours:.4g}")
                 lines.append(f"| {predictor} | {out} | " + " | ".join(cells) + " |")
+    lines += [
+        "",
+        "## Parameter uncertainty",
+        "",
+        "Estimate and standard error of each free parameter (the regression's sandwich covariance, "
+        "delta method; `model_<power>.json` holds the full covariance). Published values beside them "
+        "in the first table above.",
+        "",
+        "| parameter | " + " | ".join(f"{p} %" for p in powers) + " |",
+        "|---|" + "---|" * len(powers),
+    ]
+    models = [r.identified.model for r in results]
+    if all(m.uncertainty is not None for m in models):
+        names = models[0].parameter_names()
+        table = [parameter_estimates(m) for m in models]
+        for name in names:
+            cells = [f"{t[name][0]:.4f} ± {t[name][1]:.4f}" if name in t else "-" for t in table]
+            lines.append(f"| {name} | " + " | ".join(cells) + " |")
+        lines += [
+            "",
+            "Step and frequency responses with 95 % bands (200 models drawn from the covariance):",
+            "",
+        ]
+        for r in results:
+            png = f"engine_{r.power_percent}_bands.png"
+            plot_response_bands(out_dir / png, r.identified.model, f"{r.power_percent} % power")
+            lines += [f"![{r.power_percent} % bands]({png})", ""]
     lines += ["", "## Figures 4-8: low-frequency test, measured vs filter vs model", ""]
     for r in results:
         png = f"engine_{r.power_percent}_low_frequency.png"

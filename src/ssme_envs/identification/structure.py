@@ -22,7 +22,7 @@ criterion on the fitted models.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -32,9 +32,12 @@ DEFAULT_MAX_INDEX = 6
 DEFAULT_RANK_TOL = 0.1
 # Ratios below this are round-off (noise-free dependent rows): never a candidate decision.
 RATIO_FLOOR = 1e-6
-# Neighbours searched: decisions turned to "independent" (larger models) and to "dependent".
+# Neighbours always scored: decisions turned to "independent" (larger models; more while the
+# score improves) and to "dependent".
 STEPS_DOWN = 2
 STEPS_UP = 1
+# A BIC difference below this is weak evidence (Kass and Raftery 1995: above 10 is very strong).
+CLOSE_MARGIN = 10.0
 
 
 @dataclass
@@ -60,9 +63,10 @@ class StructureSearch:
         For each candidate row ``c_output A^power`` examined at ``rank_tol``: the norm of its new
         component over its norm, and whether it was kept.
     rank_rule : tuple of int
-        The indices the rank rule alone gives at ``rank_tol``.
+        The indices the rank rule alone gives at ``rank_tol`` (a zero or an open chain when the
+        rule alone finds no valid structure).
     candidates : list of Candidate
-        Every index set compared, the rank rule's first.
+        Every index set compared, the rank rule's (or its nearest valid neighbour's) first.
     criterion : str
         What the candidates' ``criterion`` is.
     """
@@ -72,6 +76,9 @@ class StructureSearch:
     rank_rule: tuple[int, ...] = ()
     candidates: list[Candidate] = field(default_factory=list)
     criterion: str = ""
+    rows: np.ndarray = field(default_factory=lambda: np.empty((0, 0)), repr=False)
+    rank_tol: float = DEFAULT_RANK_TOL
+    flipped: frozenset[tuple[int, int]] = field(default_factory=frozenset, repr=False)
 
     def ranked(self) -> list[Candidate]:
         """Candidates that could be fitted, best first."""
@@ -89,6 +96,46 @@ class StructureSearch:
         ranked = self.ranked()
         return ranked[1].criterion - ranked[0].criterion if len(ranked) > 1 else float("inf")
 
+    @property
+    def close(self) -> bool:
+        """Whether the runner-up is within ``CLOSE_MARGIN`` of the choice."""
+        return self.margin < CLOSE_MARGIN
+
+    def summary(self) -> str:
+        """One or two lines for a console: the choice, the runner-up and the margin."""
+        text = f"structure: indices {list(self.indices)} chosen by {self.criterion or 'the rank rule'}"
+        if self.rank_rule != self.indices:
+            text += f" (the rank rule at rank_tol {self.rank_tol:g} alone gave {list(self.rank_rule)})"
+        runner = self.runner_up
+        if runner is None:
+            return text + "; no other index set could be fitted"
+        text += f"; runner-up {list(runner.indices)} by {self.margin:.1f}"
+        if self.close:
+            text += (
+                f"\nwarning: the structure choice is close (margin below {CLOSE_MARGIN:g}): check the "
+                "structure search in report.md and give the indices with --indices if you know them"
+            )
+        return text
+
+    def to_dict(self) -> dict:
+        """JSON-ready record of the choice (stored in the model's ``fit``)."""
+        return {
+            "chosen": list(self.indices),
+            "rank_rule": list(self.rank_rule),
+            "rank_tol": self.rank_tol,
+            "criterion": self.criterion,
+            "margin": self.margin if np.isfinite(self.margin) else None,
+            "candidates": [
+                {
+                    "indices": list(c.indices),
+                    "criterion": c.criterion if np.isfinite(c.criterion) else None,
+                    "parameters": c.parameters,
+                    "note": c.note,
+                }
+                for c in self.candidates
+            ],
+        }
+
 
 def lagged(x: np.ndarray, lags: Sequence[int], start: int) -> np.ndarray:
     """Columns ``x[k - lag]`` for k = start..T-1, for each lag and each channel (lag-major)."""
@@ -98,9 +145,13 @@ def lagged(x: np.ndarray, lags: Sequence[int], start: int) -> np.ndarray:
     return np.hstack([x[start - lag : horizon - lag] for lag in lags])
 
 
-def instrumented_rows(feats: np.ndarray, y: np.ndarray, window: int, max_index: int) -> np.ndarray:
+def instrumented_rows(feats: np.ndarray, y: np.ndarray, window: int) -> np.ndarray:
     """The past outputs with the window's inputs removed, projected on older inputs (orthonormal
     coordinates): column ``k p + i`` carries the row ``c_i A^k``.
+
+    The instruments are the ``depth`` input lags before the window, enough that they can span
+    every state the search can find (``p * window``), since a state the instruments cannot
+    reach would look like a dependent row.
 
     Raises
     ------
@@ -109,22 +160,23 @@ def instrumented_rows(feats: np.ndarray, y: np.ndarray, window: int, max_index: 
     """
     horizon, p = y.shape
     n_feat = feats.shape[1]
-    start = 2 * window
-    needed = (window * n_feat + 1) + window * n_feat + window * p
+    depth = max(window, -(-p * window // n_feat))
+    start = window + depth
+    needed = (window * n_feat + 1) + depth * n_feat + window * p
     if horizon - start < 2 * needed:
         raise ValueError(
-            f"the record has {horizon} samples; a structure search up to index {max_index} needs at "
+            f"the record has {horizon} samples; a structure search up to index {window} needs at "
             f"least {start + 2 * needed} (use a longer record or a smaller max_index)"
         )
     r_block = np.hstack([lagged(feats, range(1, window + 1), start), np.ones((horizon - start, 1))])
-    z_block = lagged(feats, range(window + 1, 2 * window + 1), start)
+    z_block = lagged(feats, range(window + 1, window + depth + 1), start)
     q_block = lagged(y, range(window, 0, -1), start)
     n_r, n_z = r_block.shape[1], z_block.shape[1]
     tri = scipy.linalg.qr(np.hstack([r_block, z_block, q_block]), mode="r", check_finite=False)[0]
     diag = np.abs(np.diag(tri)[: n_r + n_z])
     if diag.min() < 1e-9 * diag.max():
         raise ValueError(
-            f"the inputs are not persistently exciting over {2 * window} lags (the lagged-input "
+            f"the inputs are not persistently exciting over {start} lags (the lagged-input "
             "matrix is rank-deficient): use a richer input such as a PRBS"
         )
     return tri[n_r : n_r + n_z, n_r + n_z :]
@@ -160,27 +212,73 @@ def rank_search(
     return tuple(indices), ratios, any(active)
 
 
-def neighbours(rows: np.ndarray, p: int, rank_tol: float) -> list[tuple[int, ...]]:
-    """Valid index sets one and two decisions away from the rank rule's: the nearest cut rows
-    kept (larger models, up to ``STEPS_DOWN``) and the nearest kept row cut (``STEPS_UP``)."""
-    found: list[tuple[int, ...]] = []
-    for direction, steps in ((-1, STEPS_DOWN), (+1, STEPS_UP)):
-        flipped: frozenset[tuple[int, int]] = frozenset()
-        for _ in range(steps):
-            _, ratios, _ = rank_search(rows, p, rank_tol, flipped)
-            if direction < 0:
-                options = [(r, i, k) for i, k, r, kept in ratios if not kept and r > RATIO_FLOOR]
-                pick = max(options, default=None)
-            else:
-                options = [(r, i, k) for i, k, r, kept in ratios if kept and k > 0 and (i, k) not in flipped]
-                pick = min(options, default=None)
-            if pick is None:
+Flips = frozenset[tuple[int, int]]
+
+
+def flips_from(
+    rows: np.ndarray, p: int, rank_tol: float, flipped: Flips, direction: int
+) -> list[tuple[Flips, tuple[int, ...] | None]]:
+    """Index sets one more decision away: ``direction`` -1 keeps, one at a time, each row the
+    threshold cut (larger models); +1 cuts the kept shifted row of smallest ratio. Each comes with
+    its flipped rows; None for a structure that is invalid (a chain still open at the window's
+    end, an output with no row)."""
+    _, ratios, _ = rank_search(rows, p, rank_tol, flipped)
+    if direction < 0:
+        picks = [(i, k) for i, k, r, kept in ratios if not kept and r > RATIO_FLOOR and (i, k) not in flipped]
+    else:
+        kept_rows = [(r, i, k) for i, k, r, kept in ratios if kept and k > 0 and (i, k) not in flipped]
+        picks = [min(kept_rows)[1:]] if kept_rows else []
+    out = []
+    for pick in picks:
+        new = flipped | {pick}
+        indices, _, open_chain = rank_search(rows, p, rank_tol, new)
+        out.append((new, None if open_chain or min(indices) == 0 else indices))
+    return out
+
+
+def explore(search: StructureSearch, score: Callable[[tuple[int, ...]], Candidate]) -> None:
+    """Score the first candidate and its neighbours, and set ``search.indices`` to the best.
+
+    Downwards (larger models): every set reached by flipping up to ``STEPS_DOWN`` cut rows (a
+    flip can make a later row look dependent, so two are needed to reach some structures), then
+    on from the best while each further flip improves on the best score so far. Upwards:
+    ``STEPS_UP`` steps of cutting the weakest kept row. ``score`` returns the candidate with its
+    criterion (inf when it cannot be fitted).
+    """
+    p = len(search.rank_rule)
+    scored = {c.indices: score(c.indices) for c in search.candidates}
+
+    def visit(flipped: Flips, direction: int) -> list[tuple[float, list, Flips]]:
+        out = []
+        for new, indices in flips_from(search.rows, p, search.rank_tol, flipped, direction):
+            if indices is not None and indices not in scored:
+                scored[indices] = score(indices)
+            out.append((scored[indices].criterion if indices is not None else float("inf"), sorted(new), new))
+        return out
+
+    level = visit(search.flipped, -1)
+    reached = list(level)
+    for _ in range(STEPS_DOWN - 1):
+        level = [child for *_, flipped in level for child in visit(flipped, -1)]
+        reached += level
+    if reached:
+        best = min(c.criterion for c in scored.values())
+        start = min(reached)
+        for _ in range(search.rows.shape[1]):
+            children = visit(start[2], -1)
+            if not children or min(children)[0] >= best:
                 break
-            flipped = flipped | {(pick[1], pick[2])}
-            indices, _, open_chain = rank_search(rows, p, rank_tol, flipped)
-            if not open_chain and min(indices) > 0 and indices not in found:
-                found.append(indices)
-    return found
+            start, best = min(children), min(children)[0]
+    flipped = search.flipped
+    for _ in range(STEPS_UP):
+        children = visit(flipped, +1)
+        if not children:
+            break
+        flipped = min(children)[2]
+    search.candidates = list(scored.values())
+    ranked = search.ranked()
+    if ranked:
+        search.indices = ranked[0].indices
 
 
 def estimate_indices(
@@ -211,17 +309,24 @@ def estimate_indices(
         raise ValueError(f"rank_tol must be in (0, 1), got {rank_tol}")
     p = y.shape[1]
     names = list(output_names) if output_names is not None else [f"y{i}" for i in range(p)]
-    rows = instrumented_rows(feats, y, max_index, max_index)
-    indices, ratios, _ = rank_search(rows, p, rank_tol)
-    for i in range(p):
-        if indices[i] == 0:
-            raise ValueError(
-                f"output '{names[i]}' adds nothing to the earlier outputs (C is not of full row rank)"
-            )
-        if ratios and any(r[0] == i and r[1] == max_index - 1 and r[3] for r in ratios):
+    rows = instrumented_rows(feats, y, max_index)
+    rank_rule, ratios, open_chain = rank_search(rows, p, rank_tol)
+    indices = rank_rule
+    if open_chain or min(indices) == 0:
+        near = [f for d in (-1, 1) for f in flips_from(rows, p, rank_tol, frozenset(), d) if f[1] is not None]
+        if not near:  # nothing near the rank rule's answer is a valid structure either
+            i = indices.index(0) if min(indices) == 0 else [r[0] for r in ratios if r[3]][-1]
+            if indices[i] == 0:
+                raise ValueError(
+                    f"output '{names[i]}' adds nothing to the earlier outputs (C is not of full row rank)"
+                )
             raise ValueError(
                 f"the observability index of output '{names[i]}' exceeds max_index={max_index}: raise "
                 "max_index, or the data may be too noisy for the rank tolerance"
             )
-    candidates = [Candidate(indices)] + [Candidate(c) for c in neighbours(rows, p, rank_tol) if c != indices]
-    return StructureSearch(indices, ratios, indices, candidates)
+        flipped, indices = near[0]
+    else:
+        flipped = frozenset()
+    search = StructureSearch(indices, ratios, rank_rule, [Candidate(indices)], rows=rows, rank_tol=rank_tol)
+    search.flipped = flipped
+    return search

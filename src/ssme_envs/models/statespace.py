@@ -301,6 +301,20 @@ class AlphaCanonicalModel:
         n = self.A.shape[0]
         return self.C @ np.linalg.solve(np.eye(n) - self.A, self.B)
 
+    def sample(self, rng: np.random.Generator, count: int) -> list[AlphaCanonicalModel]:
+        """``count`` models with parameters drawn from the uncertainty block (Gaussian)."""
+        if self.uncertainty is None:
+            raise ValueError("the model has no uncertainty block to draw from")
+        names = self.parameter_names()
+        rows = [names.index(name) for name in self.uncertainty.parameters]
+        mean = self.parameter_vector()
+        out = []
+        for draw in self.uncertainty.draws(mean[rows], rng, count):
+            values = mean.copy()
+            values[rows] = draw
+            out.append(self.with_parameters(values))
+        return out
+
     def alpha_canonical_residual(self) -> float:
         """Largest violation of eqs 5-8 with ``C = H [0 I]`` (0 for a model exactly in the form)."""
         s = self.structure

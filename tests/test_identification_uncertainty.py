@@ -1,0 +1,112 @@
+"""Parameter uncertainty of identified engine models: honest intervals, stored and read back."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from conftest import dlsim, eq36, markov
+
+from ssme_envs.identification import identify
+from ssme_envs.models import AlphaCanonicalModel, published_model
+from ssme_envs.signals import prbs
+
+MARKOV_COUNT = 10
+
+
+def coverage(power: int, seeds: range, noise: float = 0.05, samples: int = 1016):
+    """Fraction of noise seeds whose 95 % intervals (delta method on the model's covariance)
+    contain the true Markov parameters and lambda of a Table I model; per parameter."""
+    truth = published_model(power)
+    u = prbs(samples, amplitude=0.01)
+    clean = dlsim(truth.A, truth.B, truth.C, eq36(u, truth.lam))
+    want = markov(truth.A, truth.B, truth.C, MARKOV_COUNT).ravel()
+    hits, lam_hits = [], []
+    for seed in seeds:
+        rng = np.random.default_rng(seed)
+        y = clean + noise * clean.std(axis=0) * rng.standard_normal(clean.shape)
+        model = identify(u, y, 0.04).model
+        assert model.observability_indices == (2, 2)
+
+        def markov_of(values, model=model):
+            return model.with_parameters(values).markov_parameters(MARKOV_COUNT).ravel()
+
+        mean = model.parameter_vector()
+        se = np.sqrt(np.diag(model.uncertainty.propagate(markov_of, mean)))
+        hits.append(np.abs(markov_of(mean) - want) <= 1.96 * se)
+        lam_se = model.uncertainty.standard_errors[-model.n_inputs :]
+        lam_hits.append(np.abs(model.lam - truth.lam) <= 1.96 * lam_se)
+    return np.mean(hits, axis=0), np.mean(lam_hits, axis=0)
+
+
+@pytest.mark.slow
+def test_95_percent_intervals_cover_the_truth_about_95_percent_of_the_time():
+    markov_cov, lam_cov = coverage(100, range(60))
+    # 60 seeds: a true 95 % has a binomial spread of +-2.8 %; the band allows for it
+    assert 0.88 <= markov_cov.mean() <= 0.99, markov_cov.mean()
+    assert np.all(markov_cov >= 0.8), markov_cov.min()
+    assert np.all((lam_cov >= 0.85) & (lam_cov <= 1.0)), lam_cov
+
+
+def test_standard_errors_shrink_with_the_record_length():
+    truth = published_model(90)
+    ses = []
+    for samples in (1016, 4064):
+        u = prbs(samples, amplitude=0.01)
+        clean = dlsim(truth.A, truth.B, truth.C, eq36(u, truth.lam))
+        y = clean + 0.05 * clean.std(axis=0) * np.random.default_rng(1).standard_normal(clean.shape)
+        ses.append(identify(u, y, 0.04).model.uncertainty.standard_errors)
+    ratio = np.median(ses[0] / ses[1])
+    assert 1.6 < ratio < 2.5  # 1/sqrt(N): 2 for four times the samples
+
+
+def _noisy_model() -> AlphaCanonicalModel:
+    truth = published_model(100)
+    u = prbs(1016, amplitude=0.01)
+    clean = dlsim(truth.A, truth.B, truth.C, eq36(u, truth.lam))
+    y = clean + 0.05 * clean.std(axis=0) * np.random.default_rng(3).standard_normal(clean.shape)
+    return identify(u, y, 0.04).model
+
+
+def test_uncertainty_round_trips_through_model_json(tmp_path):
+    model = _noisy_model()
+    path = tmp_path / "model.json"
+    model.save(path)
+    doc = json.loads(path.read_text())
+    assert doc["schema_version"] == 2
+    assert doc["uncertainty"]["parameters"] == model.parameter_names()
+    back = AlphaCanonicalModel.load(path)
+    np.testing.assert_array_equal(back.uncertainty.covariance, model.uncertainty.covariance)
+    draws = back.sample(np.random.default_rng(0), 500)
+    spread = np.std([d.parameter_vector() for d in draws], axis=0)
+    np.testing.assert_allclose(spread, model.uncertainty.standard_errors, rtol=0.15)
+
+
+def test_version_1_files_still_load(tmp_path):
+    doc = published_model(100).to_dict()
+    doc["schema_version"] = 1
+    path = tmp_path / "v1.json"
+    path.write_text(json.dumps(doc))
+    assert AlphaCanonicalModel.load(path).uncertainty is None
+
+
+@pytest.mark.parametrize(
+    ("mutate", "message"),
+    [
+        (lambda u: u.pop("covariance"), "lacks 'covariance'"),
+        (lambda u: u.__setitem__("covariance", [[1.0]]), "shape"),
+        (lambda u: u["parameters"].__setitem__(0, "Q[9,9]"), "lacks: Q"),
+        (lambda u: u["covariance"][0].__setitem__(1, 5.0), "not symmetric"),
+        (lambda u: u["covariance"][0].__setitem__(0, -1.0), "positive semi-definite"),
+        (lambda u: u["covariance"][0].__setitem__(0, float("nan")), "NaN"),
+        (lambda u: u.__setitem__("parameters", "K"), "list of strings"),
+    ],
+)
+def test_a_malformed_uncertainty_block_is_named(tmp_path, mutate, message):
+    doc = _noisy_model().to_dict()
+    mutate(doc["uncertainty"])
+    path = tmp_path / "bad.json"
+    path.write_text(json.dumps(doc))
+    with pytest.raises(ValueError, match=message):
+        AlphaCanonicalModel.load(path)

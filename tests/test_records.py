@@ -1,0 +1,221 @@
+"""CSV records: duplicated header names, a UTF-8 BOM, degenerate validation records, and
+`ssme-envs validate engine` keeping records that share a file name apart."""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from ssme_envs.cli import main
+from ssme_envs.identification.records import check_validation_record, read_columns, record_labels
+from ssme_envs.models import identified_model
+
+DT = 0.04  # the packaged engine models' sample time
+HEADER = ("t", "beta_opov", "beta_fpov", "pc", "mr")
+SAMPLES = 60
+
+
+def _good(seed: int = 0) -> np.ndarray:
+    """A record the 110 % model can be scored on: PRBS-like valves, noisy outputs (no t column)."""
+    rng = np.random.default_rng(seed)
+    u = rng.choice([-0.01, 0.01], size=(SAMPLES, 2))
+    y = 0.01 * rng.standard_normal((SAMPLES, 2))
+    return np.column_stack([u, y])
+
+
+def _csv(path, data: np.ndarray, header=HEADER, bom: bool = False):
+    t = np.arange(data.shape[0]) * DT
+    rows = [",".join(header)] + [",".join(repr(float(v)) for v in row) for row in np.column_stack([t, data])]
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(("\ufeff" if bom else "") + "\n".join(rows) + "\n", encoding="utf-8")
+    return path
+
+
+def _one_error_line(code: int, err: str, pattern: str) -> None:
+    """The CLI's convention (as in test_pipeline_cli): exit 2, one line `error: ...`, no traceback."""
+    assert code == 2, err
+    assert err.startswith("error: ") and err.count("\n") == 1, err
+    assert "Traceback" not in err
+    assert re.search(pattern, err), err
+
+
+@pytest.fixture(scope="module")
+def model_path(tmp_path_factory):
+    path = tmp_path_factory.mktemp("model") / "model.json"
+    identified_model(110).save(path)
+    return path
+
+
+# --- header ---------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("header", "name", "times"),
+    [
+        ("t,beta_opov,beta_fpov,pc,mr,pc", "pc", "twice"),
+        ("t,t,beta_opov,beta_fpov,pc,mr", "t", "twice"),
+        ("t,beta_opov,beta_fpov,pc,mr,other, other", "other", "twice"),  # after stripping blanks
+        ("t,x,beta_opov,x,beta_fpov,pc,mr,x", "x", "3 times"),  # a column no one asked for
+    ],
+)
+def test_duplicated_header_name_is_refused_naming_it(tmp_path, header, name, times):
+    path = tmp_path / "dup.csv"
+    width = len(header.split(","))
+    path.write_text(header + "\n" + "\n".join(",".join([str(k * DT)] * width) for k in range(3)) + "\n")
+    with pytest.raises(
+        ValueError, match=rf"^{re.escape(str(path))}: column '{name}' appears {times} in the header$"
+    ):
+        read_columns(path, ["beta_opov", "beta_fpov", "pc", "mr"])
+
+
+def test_any_header_with_a_repeated_name_is_refused_property(tmp_path):
+    """Property over random headers: a name given twice is refused and named, whatever the rest."""
+    rng = np.random.default_rng(7)
+    pool = ["t", "a", "b", "pc", "mr", "beta_opov", "x y", "é"]
+    for trial in range(60):
+        names = list(rng.choice(pool, size=rng.integers(1, 5), replace=False))
+        dup = str(rng.choice(names))
+        header = [*names]
+        header.insert(int(rng.integers(0, len(header) + 1)), dup)
+        path = tmp_path / f"h{trial}.csv"
+        path.write_text(",".join(header) + "\n" + ",".join(["1"] * len(header)) + "\n", encoding="utf-8")
+        with pytest.raises(ValueError, match=f"column '{re.escape(dup)}' appears twice in the header"):
+            read_columns(path, [names[0]], dt=0.1)
+
+
+def test_cli_validate_refuses_a_duplicated_header(tmp_path, capsys, model_path):
+    data = _csv(tmp_path / "dup.csv", np.column_stack([_good(), _good(1)[:, 3]]), (*HEADER, "mr"))
+    code = main(
+        ["validate", "engine", "--model", str(model_path), "--data", str(data), "--out", str(tmp_path)]
+    )
+    _one_error_line(code, capsys.readouterr().err, r"dup\.csv: column 'mr' appears twice in the header")
+
+
+def test_bom_file_reads_the_same_as_without(tmp_path):
+    data = _good()
+    plain = _csv(tmp_path / "plain.csv", data)
+    bom = _csv(tmp_path / "bom.csv", data, bom=True)
+    assert bom.read_bytes().startswith(b"\xef\xbb\xbf")
+    columns = ["beta_opov", "beta_fpov", "pc", "mr"]
+    a, dt_a = read_columns(plain, columns)
+    b, dt_b = read_columns(bom, columns)
+    np.testing.assert_array_equal(a, b)
+    assert dt_a == dt_b == pytest.approx(DT)
+    np.testing.assert_array_equal(a, data)
+
+
+# --- degenerate validation records ----------------------------------------------------------------
+
+
+def _degenerate(case: str) -> np.ndarray:
+    data = _good()
+    if case == "zero":
+        data[:, 2] = 0.0
+    elif case == "constant":
+        data[:, 3] = 0.25
+    elif case == "tiny":  # squares underflow to zero: SEE would divide by zero
+        data[:, 3] = 1e-170 * np.sign(data[:, 3])
+    elif case == "huge_output":
+        data[5, 3] = 1e308
+    elif case == "huge_input":
+        data[:, 1] *= 1e200
+    elif case == "nan":
+        data[7, 2] = np.nan
+    elif case == "inf":
+        data[9, 0] = -np.inf
+    return data
+
+
+DEGENERATE = [
+    ("zero", r"output 'pc' is zero throughout"),
+    ("constant", r"output 'mr' is constant \(0\.25\)"),
+    ("tiny", r"output 'mr' is zero throughout \(or too small to square\)"),
+    ("huge_output", r"output 'mr' reaches 1e\+308: its squares overflow"),
+    ("huge_input", r"input 'beta_fpov' reaches 1e\+198: its squares overflow"),
+    ("nan", r"output 'pc' has NaN or inf at sample 7"),
+    ("inf", r"input 'beta_opov' has NaN or inf at sample 9"),
+]
+
+
+@pytest.mark.parametrize(("case", "message"), DEGENERATE)
+def test_check_validation_record_refuses_degenerate_records(case, message):
+    data = _degenerate(case)
+    with pytest.raises(ValueError, match=rf"^runs/x\.csv: {message}"):
+        check_validation_record(
+            data[:, :2], data[:, 2:], ("beta_opov", "beta_fpov"), ("pc", "mr"), "runs/x.csv"
+        )
+
+
+def test_check_validation_record_accepts_a_good_record_and_checks_shapes():
+    data = _good()
+    check_validation_record(data[:, :2], data[:, 2:], ("a", "b"), ("c", "d"))
+    with pytest.raises(ValueError, match=r"^record: 2 input and 1 output names"):
+        check_validation_record(data[:, :2], data[:, 2:], ("a", "b"), ("c",))
+    with pytest.raises(ValueError, match="equal length"):
+        check_validation_record(data[:, :2], data[:-1, 2:], ("a", "b"), ("c", "d"))
+
+
+@pytest.mark.parametrize(("case", "message"), DEGENERATE)
+def test_cli_validate_refuses_degenerate_records(tmp_path, capsys, model_path, case, message):
+    good = _csv(tmp_path / "good.csv", _good())
+    bad = _csv(tmp_path / f"{case}.csv", _degenerate(case))
+    argv = ["validate", "engine", "--model", str(model_path), "--data", str(good), "--data", str(bad)]
+    code = main([*argv, "--out", str(tmp_path / "v")])
+    _one_error_line(code, capsys.readouterr().err, re.escape(str(bad)) + ": " + message)
+    assert not (tmp_path / "v").exists()  # refused before anything is written
+
+
+@pytest.mark.parametrize(("case", "message"), DEGENERATE[:3])
+def test_cli_identify_refuses_a_degenerate_validation_record(tmp_path, capsys, case, message):
+    data = _csv(tmp_path / "id.csv", _good(3))
+    bad = _csv(tmp_path / f"{case}.csv", _degenerate(case))
+    code = main(
+        ["identify", "engine", "--data", str(data), "--validate", str(bad), "--out", str(tmp_path / "o")]
+    )
+    _one_error_line(code, capsys.readouterr().err, re.escape(str(bad)) + ": " + message)
+
+
+def test_console_validate_refuses_an_overflowing_prediction_without_warnings(tmp_path, model_path):
+    """Inputs just below the record limit: the model's prediction overflows, SEE would be inf."""
+    data = _good()
+    limit = 0.5 * np.sqrt(np.finfo(float).max / SAMPLES)
+    data[:, :2] = np.sign(data[:, :2]) * 0.99 * limit
+    path = _csv(tmp_path / "loud.csv", data)
+    proc = subprocess.run(
+        [sys.executable, "-m", "ssme_envs.cli", "validate", "engine", "--model", str(model_path),
+         "--data", str(path), "--out", str(tmp_path / "v")],
+        capture_output=True, text=True, check=False,
+    )  # fmt: skip
+    _one_error_line(proc.returncode, proc.stderr, r"loud\.csv: the filter's see for output 'pc' is inf")
+
+
+# --- records with the same file name --------------------------------------------------------------
+
+
+def test_record_labels_are_distinct():
+    paths = ["a/run.csv", "b/run.csv", "c/RUN.csv", "d/run_2.csv", "e/other.csv"]
+    assert record_labels(paths) == ["run", "run_2", "RUN_3", "run_2_2", "other"]
+    assert record_labels([]) == []
+
+
+def test_cli_validate_keeps_records_with_the_same_file_name_apart(tmp_path, capsys, model_path):
+    first = _csv(tmp_path / "a" / "run.csv", _good(1))
+    second = _csv(tmp_path / "b" / "run.csv", 3 * _good(2))
+    third = _csv(tmp_path / "c" / "other.csv", _good(4))
+    out = tmp_path / "v"
+    argv = ["validate", "engine", "--model", str(model_path), "--data", str(first), str(second)]
+    assert main([*argv, "--data", str(third), "--out", str(out)]) == 0  # nargs and repeated --data
+    printed = capsys.readouterr().out
+    assert f"{first}: model SEE" in printed
+    assert f"{second} (reported as run_2): model SEE" in printed
+    assert f"{third}: model SEE" in printed
+    report = (out / "report.md").read_text()
+    rows = [line for line in report.splitlines() if line.startswith("| run") or line.startswith("| other")]
+    assert [r.split("|")[1].strip() for r in rows] == ["run", "run", "run_2", "run_2", "other", "other"]
+    assert rows[1] != rows[3]  # the two model rows are the two different records' scores
+    for png in ("run.png", "run_2.png", "other.png"):
+        assert f"]({png})" in report and (out / png).stat().st_size > 1000
