@@ -9,6 +9,7 @@ import pytest
 from conftest import dlsim, eq36, markov
 
 from ssme_envs.identification import identify
+from ssme_envs.identification.covariance import markov_standard_errors
 from ssme_envs.models import AlphaCanonicalModel, published_model
 from ssme_envs.signals import prbs
 
@@ -28,13 +29,8 @@ def coverage(power: int, seeds: range, noise: float = 0.05, samples: int = 1016)
         y = clean + noise * clean.std(axis=0) * rng.standard_normal(clean.shape)
         model = identify(u, y, 0.04).model
         assert model.observability_indices == (2, 2)
-
-        def markov_of(values, model=model):
-            return model.with_parameters(values).markov_parameters(MARKOV_COUNT).ravel()
-
-        mean = model.parameter_vector()
-        se = np.sqrt(np.diag(model.uncertainty.propagate(markov_of, mean)))
-        hits.append(np.abs(markov_of(mean) - want) <= 1.96 * se)
+        estimate, se = markov_standard_errors(model, MARKOV_COUNT)
+        hits.append(np.abs(estimate.ravel() - want) <= 1.96 * se.ravel())
         lam_se = model.uncertainty.standard_errors[-model.n_inputs :]
         lam_hits.append(np.abs(model.lam - truth.lam) <= 1.96 * lam_se)
     return np.mean(hits, axis=0), np.mean(lam_hits, axis=0)

@@ -44,6 +44,7 @@ import numpy as np
 import scipy.linalg
 
 from ssme_envs.identification.covariance import parameter_uncertainty
+from ssme_envs.identification.metrics import filter_prediction
 from ssme_envs.identification.structure import (
     DEFAULT_MAX_INDEX,
     DEFAULT_RANK_TOL,
@@ -58,6 +59,9 @@ from ssme_envs.models.statespace import AlphaCanonicalModel, AlphaStructure, asy
 
 # Simulation errors below this fraction of an output's spread are round-off (exact fits).
 CRITERION_FLOOR = 1e-10
+# Share of the record the candidate structures are fitted on; the rest scores them.
+ESTIMATION_SHARE = 2 / 3
+IV_PASSES = 2
 # Simulated outputs beyond this cannot serve as instruments (their squares overflow).
 OVERFLOW_GUARD = 1e100
 
@@ -295,7 +299,7 @@ def _fit(
         # Each pass takes the previous model's simulated output as instruments; a pass is kept
         # only if its model is stable and simulates the record at least as well (weak
         # instruments can otherwise throw the estimate away from the least-squares one).
-        for _ in range(2):
+        for _ in range(IV_PASSES):
             source = fit.simulated
             if source is None:  # an unstable start still gives instruments, unless it overflows
                 with np.errstate(over="ignore", invalid="ignore"):
@@ -318,21 +322,25 @@ def _fit(
     return fit
 
 
-def _criterion(fit: _Fit, y: np.ndarray, use_simulation: bool) -> tuple[float, int, tuple[float, ...]]:
-    """BIC of a fitted structure: N sum_i log(mse_i) + (parameters) log N, with mse_i the mean
-    squared simulation error of output i (one-step error of the regression when the models are
-    unstable), floored at round-off so that exact fits tie and the smaller model wins."""
-    n = y.shape[0] - fit.start
-    k = sum(theta.size for theta in fit.thetas)
-    if use_simulation:
-        if fit.simulated is None:
-            return float("inf"), k, ()
-        err = (y - fit.simulated)[fit.start :]
+def _held_out_criterion(
+    model: AlphaCanonicalModel, parameters: int, u: np.ndarray, y: np.ndarray, split: int, simulation: bool
+) -> tuple[float, tuple[float, ...]]:
+    """BIC-like score of a model fitted on the samples before ``split``, on the samples after it:
+    N sum_i log(mse_i) + parameters log N, with mse_i the mean squared simulation error of output i
+    (the filter's one-step error when ``simulation`` is off, for unstable plants), floored at
+    round-off so that exact fits tie and the smaller model wins."""
+    if simulation:
+        if model.spectral_radius() >= 1.0:
+            return float("inf"), ()
+        predicted = linear_response(model, u)
     else:
-        err = np.column_stack(fit.residuals(y))
+        predicted = filter_prediction(model, u, y)
+    err = (y - predicted)[split:]
+    n = err.shape[0]
     mse = np.mean(err**2, axis=0)
     floor = (CRITERION_FLOOR * np.std(y, axis=0)) ** 2
-    return float(n * np.sum(np.log(np.maximum(mse, floor))) + k * np.log(n)), k, tuple(np.sqrt(mse).tolist())
+    score = float(n * np.sum(np.log(np.maximum(mse, floor))) + parameters * np.log(n))
+    return score, tuple(np.sqrt(mse).tolist())
 
 
 def identify(
@@ -385,29 +393,44 @@ def identify(
     search = None
     if indices is None:
         search = estimate_indices(u, y, max_index, rank_tol, asymmetric, out_names, in_names)
+        # Candidates are fitted on the first part of the record and scored on the rest, where a
+        # model that fitted the noise gains nothing; the chosen one is then fitted on it all.
+        split = round(u.shape[0] * ESTIMATION_SHARE)
+        head = (u[:split], y[:split])
         fits: dict[tuple[int, ...], _Fit] = {}
-        first = search.candidates[0].indices
-        fits[first] = _fit(AlphaStructure.from_indices(first), u, y, dt, method, asymmetric, names)
-        use_simulation = fits[first].simulated is not None
 
-        def score(indices: tuple[int, ...]) -> Candidate:
-            cand = Candidate(indices, criterion=float("inf"))
-            try:
-                if indices not in fits:
-                    fits[indices] = _fit(
-                        AlphaStructure.from_indices(indices), u, y, dt, method, asymmetric, names
-                    )
-            except ValueError as exc:
-                cand.note = str(exc)
+        def fit_head(indices: tuple[int, ...]) -> _Fit:
+            if indices not in fits:
+                fits[indices] = _fit(
+                    AlphaStructure.from_indices(indices), *head, dt, method, asymmetric, names
+                )
+            return fits[indices]
+
+        try:
+            simulation = fit_head(search.candidates[0].indices).model.spectral_radius() < 1.0
+        except ValueError as exc:  # too short to hold a part out: the rank rule decides alone
+            search.candidates[0].note = f"no held-out comparison: {exc}"
+        else:
+
+            def score(indices: tuple[int, ...]) -> Candidate:
+                cand = Candidate(indices, criterion=float("inf"))
+                try:
+                    fitted = fit_head(indices)
+                except ValueError as exc:
+                    cand.note = str(exc)
+                    return cand
+                cand.parameters = sum(theta.size for theta in fitted.thetas)
+                cand.criterion, cand.rms_error = _held_out_criterion(
+                    fitted.model, cand.parameters, u, y, split, simulation
+                )
+                if not np.isfinite(cand.criterion):
+                    cand.note = "the fitted model is unstable"
                 return cand
-            cand.criterion, cand.parameters, cand.rms_error = _criterion(fits[indices], y, use_simulation)
-            if not np.isfinite(cand.criterion):
-                cand.note = "the fitted model is unstable"
-            return cand
 
-        explore(search, score)
-        search.criterion = "BIC of the simulation error" if use_simulation else "BIC of the one-step error"
-        fit = fits[search.indices]
+            explore(search, score)
+            kind = "simulation" if simulation else "one-step prediction"
+            search.criterion = f"BIC of the {kind} error on the last {u.shape[0] - split} samples"
+        fit = _fit(AlphaStructure.from_indices(search.indices), u, y, dt, method, asymmetric, names)
     else:
         fit = _fit(AlphaStructure.from_indices(indices), u, y, dt, method, asymmetric, names)
     if search is not None:

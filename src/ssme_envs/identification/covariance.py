@@ -26,6 +26,7 @@ from ssme_envs.models.uncertainty import ParameterUncertainty, jacobian
 
 if TYPE_CHECKING:
     from ssme_envs.identification.alpha_canonical import _Fit
+    from ssme_envs.models.statespace import AlphaCanonicalModel
 
 
 def theta_covariance(
@@ -67,3 +68,22 @@ def parameter_uncertainty(fit: _Fit, y: np.ndarray, method: str) -> ParameterUnc
         f"with {lags} lags of the equation error, delta method to the model parameters",
         samples=int(y.shape[0]),
     )
+
+
+def markov_standard_errors(model: AlphaCanonicalModel, count: int) -> tuple[np.ndarray, np.ndarray]:
+    """Markov parameters ``C A^k B`` (k < count) and their standard errors by the delta method on
+    the model's parameter covariance; both of shape (count, p, m)."""
+    if model.uncertainty is None:
+        raise ValueError("the model has no uncertainty block")
+    names = model.parameter_names()
+    rows = [names.index(name) for name in model.uncertainty.parameters]
+    mean = model.parameter_vector()
+
+    def markov(values: np.ndarray) -> np.ndarray:
+        full = mean.copy()
+        full[rows] = values
+        return model.with_parameters(full).markov_parameters(count).ravel()
+
+    cov = model.uncertainty.propagate(markov, mean[rows])
+    shape = (count, model.n_outputs, model.n_inputs)
+    return markov(mean[rows]).reshape(shape), np.sqrt(np.clip(np.diag(cov), 0, None)).reshape(shape)
