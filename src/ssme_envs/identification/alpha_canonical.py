@@ -2,25 +2,16 @@
 
 Any number of inputs and outputs and any observability indices. The steps:
 
-1. **Structure** (eqs 28-33). The past outputs ``Q`` (lags ``1..L`` of every output), after
-   their projection on the lagged inputs ``R`` is removed, span the same row space as the
-   observability matrix (``Q_o = V M V^T``, eq 31). A row-by-row search over ``C``, ``CA``,
-   ``CA^2``, ... keeps each output's next row while it adds a new direction; the number of
-   rows kept for output ``i`` is ``mu_i``. The projections come from one QR factorization of
-   ``[R Z Q]`` (never from inverting ``R R^T``). ``Z`` holds older inputs: projecting ``Q``
-   on them as instruments removes white measurement noise, so dependent rows shrink towards
-   zero as the record grows while independent ones do not.
-
-   Decision rule: a candidate row is independent when the norm of its component orthogonal
-   to the rows already kept exceeds ``rank_tol`` (default 0.1) times its own norm. Noise-free
-   data give ratios near 1e-15 for dependent rows; with the instrument projection, white
-   output noise lifts them only in proportion to the noise-to-signal ratio over sqrt(N)
-   (below 0.02 for 5 % noise on 2000 samples of the Table I models), while independent rows
-   of those models sit at 0.45 or more. The threshold sits between the two on a log scale;
-   the report plots every ratio so the margin can be seen.
+1. **Structure** (eqs 28-33): the row-by-row rank search of :mod:`.structure`, then a choice
+   among the index sets one or two rank decisions away: each is fitted on the first two thirds
+   of the record and scored by the BIC of its simulation error on the last third (the search
+   holds every candidate, the runner-up and the margin).
 
 2. **Parameters** (eq 27). Each output's one-step equation ``y_i(k) = theta_i phi_i(k)`` is
-   solved by least squares with only the regressors eq 8 leaves free, plus a constant. With
+   solved by least squares with only the regressors eq 8 leaves free, plus a constant, plus
+   the current samples ``y_j(k)`` of earlier outputs with longer chains (``j < i``,
+   ``mu_j > mu_i``): the row search lets ``c_i A^mu_i`` depend on ``c_j A^mu_i``, which eq 8's
+   pattern leaves out (it covers only the systems without such a dependency). With
    ``method="iv"`` (default) two instrumental-variable passes follow, the instruments being
    the lags of the previous model's simulated output: consistent under white output noise,
    and identical to least squares on noise-free data.
@@ -32,7 +23,11 @@ Any number of inputs and outputs and any observability indices. The steps:
    their coefficients to those of ``u``.
 
 4. **Realization**: row ``(i, d)`` of ``[K B]`` is the coefficient of ``[y; u](k-1-d)`` in
-   output ``i``'s equation; ``A = A_o + K C``, ``C = [0 I]`` (eqs 5-8).
+   output ``i``'s equation; the current-sample coefficients ``L`` give ``H = (I - L)^-1``;
+   ``A = A_o + K C``, ``C = H [0 I]`` (eqs 5-8 with the general ``H``; ``H = I`` for Table I).
+
+5. **Uncertainty** (:mod:`.covariance`): the regression's sandwich covariance, carried to the
+   model's free parameters by the delta method, stored as ``model.uncertainty``.
 """
 
 from __future__ import annotations
