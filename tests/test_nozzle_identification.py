@@ -6,11 +6,14 @@ import json
 
 import numpy as np
 import pytest
+import scipy.signal
+from conftest import dlsim
 
 from ssme_envs.cli import main
-from ssme_envs.identification.bouc_wen import fit_bouc_wen
+from ssme_envs.identification.bouc_wen import NORMALIZED_NAMES, fit_bouc_wen
 from ssme_envs.identification.nozzle_pipeline import (
     NozzleRecord,
+    _finite_or_none,
     bench_experiment,
     identify_nozzle,
     strong_hysteresis_nozzle,
@@ -18,6 +21,9 @@ from ssme_envs.identification.nozzle_pipeline import (
     validation_experiment,
     write_nozzle_record,
 )
+from ssme_envs.identification.nozzle_report import write_nozzle_report
+from ssme_envs.identification.nozzle_uncertainty import dsr_e_uncertainty, regression_covariance
+from ssme_envs.identification.subspace import dsr_e, second_order_parameters
 from ssme_envs.models.nozzle import NozzleModel, identified_nozzle, published_nozzle, simulate_nozzle
 from ssme_envs.signals import prbs
 
@@ -53,7 +59,7 @@ def test_strong_hysteresis_is_recovered_and_predicts_unseen_data(strong):
     assert figures["joint_fit_percent"] > figures["dsr_e_fit_percent"] + 20  # the linear model cannot
 
 
-def test_linear_range_record_leaves_hysteresis_undetermined():
+def test_linear_range_record_leaves_hysteresis_undetermined(tmp_path):
     record = bench_experiment(published_nozzle(), samples=2000, range_deg=0.02)
     ident = identify_nozzle(record)
     assert not ident.bouc_wen.determined
@@ -61,6 +67,21 @@ def test_linear_range_record_leaves_hysteresis_undetermined():
     assert "not determined by the data" in ident.bouc_wen.reason
     # the linear joint it falls back on still describes the record as well as the Bouc-Wen fit
     assert ident.bouc_wen.linear_fit_percent >= ident.bouc_wen.fit_percent - 0.5
+    # the shape parameters the record hardly determines carry large standard errors (not the
+    # round-off a pseudo-inverse gave them), no covariance is stored, and the report has no table
+    for name in ("beta_n", "gamma_n", "n"):
+        assert ident.bouc_wen.relative_std[name] > 0.5, name
+    assert ident.model.bouc_wen_uncertainty is None and ident.model.linear_uncertainty is not None
+    ident.model.save(tmp_path / "model.json")
+    saved = json.loads((tmp_path / "model.json").read_text())
+    assert saved["bouc_wen"] is None and "uncertainty" in saved["linear"]
+    write_nozzle_report(tmp_path, ident, {"identification": record})
+    report = (tmp_path / "report.md").read_text()
+    assert "| parameter | value" not in report
+    assert (
+        "No Bouc-Wen parameters are reported: the hysteresis parameters are not determined by the data"
+        in report
+    )
 
 
 def test_fit_is_reproducible_for_any_worker_count():
@@ -203,3 +224,197 @@ def test_angle_offset_is_refused():
     record = bench_experiment(published_nozzle(), samples=600)
     with pytest.raises(ValueError, match="not at rest at zero"):
         fit_bouc_wen(record.tau, record.beta + 0.01, 0.008, workers=1)
+
+
+# --- uncertainty: J, b, k by the residual bootstrap, the Bouc-Wen regression covariance, model.json
+
+
+def _zoh_joint(J: float, b: float, k: float, dt: float):
+    """The linear joint J x'' + b x' + k x = tau sampled with a zero-order hold, by scipy."""
+    a = np.array([[0.0, 1.0], [-k / J, -b / J]])
+    b_in = np.array([[0.0], [1.0 / J]])
+    ad, bd, cd, _, _ = scipy.signal.cont2discrete((a, b_in, np.array([[1.0, 0.0]]), np.zeros((1, 1))), dt)
+    return ad, bd, cd
+
+
+LINEAR_TRUTH = (25.18, 376.53, 1.43e5)  # Table 1, linear row
+_TAU = 2000.0 * np.repeat(np.sign(np.random.default_rng(99).standard_normal(500)), 2)  # 1000 samples
+_CLEAN = dlsim(*_zoh_joint(*LINEAR_TRUTH, 0.008), _TAU[:, None])[:, 0]
+
+
+def _noisy_joint(seed: int) -> np.ndarray:
+    return _CLEAN + 5e-5 * np.random.default_rng(seed).standard_normal(_CLEAN.size)
+
+
+def _jbk(result) -> np.ndarray:
+    params = second_order_parameters(result.model)
+    return np.array([params["J"], params["b"], params["k"]])
+
+
+@pytest.fixture(scope="module")
+def bootstrap_runs():
+    """20 noise seeds with bootstrap standard errors; 100 more seeds for the spread alone."""
+    est, se = [], []
+    for seed in range(20):
+        y = _noisy_joint(seed)
+        result = dsr_e(_TAU, y, 0.008, order=2)
+        boot = dsr_e_uncertainty(_TAU, y, 0.008, result, replicates=25, seed=seed, workers=1)
+        est.append(_jbk(result))
+        se.append(boot.standard_errors)
+    spread = np.array([_jbk(dsr_e(_TAU, _noisy_joint(s), 0.008, order=2)) for s in range(100, 200)])
+    return np.array(est), np.array(se), np.vstack([est, spread]).std(axis=0, ddof=1)
+
+
+def test_dsr_e_standard_errors_match_the_spread_over_noise_seeds(bootstrap_runs):
+    _, se, spread = bootstrap_runs
+    ratio = se.mean(axis=0) / spread
+    assert np.all((ratio > 0.7) & (ratio < 1.4)), ratio
+
+
+def test_dsr_e_intervals_cover_the_truth(bootstrap_runs):
+    est, se, _ = bootstrap_runs
+    hits = np.sum(np.abs(est - np.array(LINEAR_TRUTH)) <= 1.96 * se, axis=0)
+    assert np.all(hits >= 15), hits  # of 20; 95 % expected
+
+
+def test_bootstrap_is_reproducible_for_any_worker_count():
+    y = _noisy_joint(3)
+    result = dsr_e(_TAU, y, 0.008, order=2)
+    runs = {w: dsr_e_uncertainty(_TAU, y, 0.008, result, replicates=10, seed=4, workers=w) for w in (2, 3)}
+    np.testing.assert_array_equal(runs[2].replicates, runs[3].replicates)
+    here = dsr_e_uncertainty(_TAU, y, 0.008, result, replicates=10, seed=4, workers=1)
+    again = dsr_e_uncertainty(_TAU, y, 0.008, result, replicates=10, seed=4, workers=1)
+    np.testing.assert_array_equal(here.covariance, again.covariance)
+    # one BLAS thread in the workers, the caller's here: the same draws, round-off apart
+    np.testing.assert_allclose(here.replicates, runs[2].replicates, rtol=1e-6)
+    other = dsr_e_uncertainty(_TAU, y, 0.008, result, replicates=10, seed=5, workers=1)
+    assert not np.allclose(other.replicates, here.replicates, rtol=1e-9)
+    assert here.parameter_uncertainty().parameters == ("J", "b", "k")
+    np.testing.assert_allclose(here.standard_errors, here.replicates.std(axis=0, ddof=1))
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        ({"replicates": 5}, "replicates must be an integer >= 10"),
+        ({"workers": 0}, "workers must be an integer >= 1"),
+        ({"noise": "pink"}, "noise must be one of white, innovations"),
+        ({"dt": 0.01}, r"sample time 0\.008 s differs from dt = 0\.01 s"),
+        ({"order": 3}, "a second-order model is needed"),
+        ({"y": np.r_[np.nan, np.zeros(999)]}, "y has NaN"),
+    ],
+)
+def test_bootstrap_bad_arguments(change, message):
+    y = _noisy_joint(1)
+    result = dsr_e(_TAU, y, 0.008, order=change.pop("order", 2))
+    kwargs = {"u": _TAU, "y": y, "dt": 0.008, "result": result, **change}
+    with pytest.raises(ValueError, match=message):
+        dsr_e_uncertainty(**kwargs)
+
+
+def test_regression_covariance_against_the_normal_equations():
+    rng = np.random.default_rng(0)
+    x = rng.standard_normal((200, 3)) * [1.0, 1e3, 1e-3]
+    np.testing.assert_allclose(regression_covariance(x, 2.5), 2.5 * np.linalg.inv(x.T @ x), rtol=1e-9)
+    # a parameter the residuals do not depend on, and two that only act together: infinite
+    # variance, not the zero a pseudo-inverse gives; the determined one keeps its own
+    loose = np.column_stack([x[:, 0], np.zeros(200), x[:, 1], 2.0 * x[:, 1]])
+    cov = regression_covariance(loose, 2.5)
+    assert np.isinf(cov[1, 1]) and np.isinf(cov[2, 2]) and np.isinf(cov[3, 3])
+    kept = x[:, :2]  # the regression on what the data determine: x0 and the combination along x1
+    assert cov[0, 0] == pytest.approx(2.5 * np.linalg.inv(kept.T @ kept)[0, 0], rel=1e-9)
+
+
+def test_identification_carries_standard_errors_into_model_json_and_report(tmp_path, strong):
+    _, record, ident = strong
+    model = ident.model
+    assert model.linear_uncertainty.parameters == ("J", "b", "k")
+    assert np.all(np.isfinite(model.linear_uncertainty.standard_errors))
+    assert np.all(model.linear_uncertainty.standard_errors > 0)
+    bw = ident.bouc_wen
+    assert model.bouc_wen_uncertainty.parameters == NORMALIZED_NAMES
+    np.testing.assert_allclose(
+        model.bouc_wen_uncertainty.standard_errors, [bw.standard_errors[n] for n in NORMALIZED_NAMES]
+    )
+    path = tmp_path / "model.json"
+    model.save(path)
+    doc = json.loads(path.read_text())
+    assert doc["schema_version"] == 2
+    assert doc["linear"]["uncertainty"]["parameters"] == ["J", "b", "k"]
+    assert doc["bouc_wen"]["uncertainty"]["parameters"] == list(NORMALIZED_NAMES)
+    back = NozzleModel.load(path)
+    np.testing.assert_array_equal(back.linear_uncertainty.covariance, model.linear_uncertainty.covariance)
+    np.testing.assert_array_equal(back.bouc_wen_uncertainty.covariance, model.bouc_wen_uncertainty.covariance)
+    assert back.bouc_wen == model.bouc_wen and back.linear["J"] == model.linear["J"]
+    write_nozzle_report(tmp_path, ident, {"identification": record})
+    report = (tmp_path / "report.md").read_text()
+    se = model.linear_uncertainty.standard_errors
+    assert f"| standard error (bootstrap) | {se[0]:.2g} | {se[1]:.2g} | {se[2]:.2g} |" in report
+    assert "| parameter | value | standard error | relative |" in report
+    assert f"| k_hys | {bw.normalized['k_hys']:.6g} | {bw.standard_errors['k_hys']:.2g} |" in report
+
+
+def test_undetermined_standard_errors_are_written_as_null():
+    assert _finite_or_none({"n": np.inf, "J": 0.5}) == {"n": None, "J": 0.5}
+
+
+def test_version_1_model_without_uncertainty_still_loads(tmp_path):
+    doc = identified_nozzle().to_dict()
+    doc["schema_version"] = 1
+    path = tmp_path / "m.json"
+    path.write_text(json.dumps(doc))
+    model = NozzleModel.load(path)
+    assert model.linear_uncertainty is None and model.bouc_wen_uncertainty is None
+
+
+def _with_uncertainty() -> dict:
+    doc = identified_nozzle().to_dict()
+    cov = np.diag([1e-6, 1e-3, 10.0])
+    doc["linear"]["uncertainty"] = {
+        "parameters": ["J", "b", "k"],
+        "covariance": cov.tolist(),
+        "standard_errors": np.sqrt(np.diag(cov)).tolist(),
+        "method": "test",
+        "samples": 7476,
+    }
+    cov7 = np.diag(np.arange(1.0, 8.0))
+    doc["bouc_wen"]["uncertainty"] = {"parameters": list(NORMALIZED_NAMES), "covariance": cov7.tolist()}
+    return doc
+
+
+def test_uncertainty_blocks_round_trip(tmp_path):
+    path = tmp_path / "m.json"
+    path.write_text(json.dumps(_with_uncertainty()))
+    model = NozzleModel.load(path)
+    np.testing.assert_allclose(model.linear_uncertainty.standard_errors, np.sqrt([1e-6, 1e-3, 10.0]))
+    assert model.bouc_wen_uncertainty.covariance[6, 6] == 7.0
+    model.save(path)
+    assert NozzleModel.load(path).to_dict() == model.to_dict()
+
+
+@pytest.mark.parametrize(
+    ("mutate", "message"),
+    [
+        (lambda d: d["linear"]["uncertainty"].pop("covariance"), "linear.uncertainty: uncertainty lacks"),
+        (
+            lambda d: d["linear"].update(uncertainty=[1, 2]),
+            "linear.uncertainty: uncertainty must be an object",
+        ),
+        (lambda d: d["linear"]["uncertainty"].update(parameters=["J", "b", "zeta"]), "lacks: zeta"),
+        (lambda d: d["linear"]["uncertainty"].update(covariance=[[1.0, 0.0], [0.0, 1.0]]), "has shape"),
+        (lambda d: d["linear"]["uncertainty"]["covariance"][0].__setitem__(1, 0.5), "not symmetric"),
+        (lambda d: d["linear"]["uncertainty"].update(standard_errors=[1.0, 2.0, 3.0]), "disagree"),
+        (lambda d: d["linear"]["uncertainty"].update(standard_errors="small"), "list of numbers"),
+        (lambda d: d["bouc_wen"]["uncertainty"]["parameters"].__setitem__(2, "k"), "lacks: k"),
+        (lambda d: d["bouc_wen"]["uncertainty"].update(covariance=(-np.eye(7)).tolist()), "positive semi"),
+        (lambda d: d.update(schema_version=3), "unsupported schema_version 3"),
+    ],
+)
+def test_malformed_uncertainty_block(tmp_path, mutate, message):
+    doc = _with_uncertainty()
+    mutate(doc)
+    path = tmp_path / "m.json"
+    path.write_text(json.dumps(doc))
+    with pytest.raises(ValueError, match=message) as err:
+        NozzleModel.load(path)
+    assert str(err.value).startswith(f"{path}: ")

@@ -18,7 +18,9 @@ normalization of ``A`` (default 0.35, Table 1's value, so that numbers compare w
    Jacobian's columns are simulated in ``workers`` processes.
 3. **Identifiability**: a linear joint (J, b, k) is fitted the same way. The hysteresis counts
    as determined only if the Bouc-Wen model describes the record (fit >= 80 %), lowers the
-   residual significantly (F-test, p < 1e-3), and the standard errors from the Jacobian leave
+   residual significantly (F-test, p < 1e-3), and the standard errors from the Jacobian (the
+   regression covariance ``s^2 (J^T J)^-1``, ``s^2 = SSE / (N - 7)``, infinite for a parameter
+   the record does not determine: :func:`regression_covariance`) leave
    ``k_hys``, ``n`` and the loading and unloading coefficients known to better than 50 %.
    Otherwise the fit says so and returns no Bouc-Wen parameters, rather than numbers the data
    do not support.
@@ -40,6 +42,7 @@ import scipy.stats
 
 from ssme_envs.identification.alpha_canonical import check_record
 from ssme_envs.identification.metrics import fit_percent
+from ssme_envs.identification.nozzle_uncertainty import regression_covariance
 from ssme_envs.models.nozzle import NozzleParameters, recommended_substeps, simulate_nozzle
 from ssme_envs.models.statespace import check_dt
 
@@ -69,7 +72,14 @@ class BoucWenFit:
     normalized : dict
         Best normalized Bouc-Wen parameters (reported even when not determined).
     relative_std : dict
-        Standard error over value of each normalized parameter (inf when not determined at all).
+        Standard error over value of each normalized parameter (inf when the record does not
+        determine it at all).
+    standard_errors : dict
+        Standard error of each normalized parameter (:func:`regression_covariance`; inf when the
+        record does not determine it).
+    covariance : ndarray (7, 7) or None
+        Their joint covariance in the order of ``NORMALIZED_NAMES``; None when some parameter is
+        not determined (an infinite variance).
     p_value : float
         F-test of the Bouc-Wen model against the linear one.
     fit_percent, linear_fit_percent : float
@@ -83,6 +93,8 @@ class BoucWenFit:
     linear: NozzleParameters
     normalized: dict[str, float]
     relative_std: dict[str, float]
+    standard_errors: dict[str, float]
+    covariance: np.ndarray | None
     p_value: float
     fit_percent: float
     linear_fit_percent: float
@@ -381,8 +393,8 @@ def _assess(
     p_value = float(scipy.stats.f.sf(f_stat, 4, dof)) if np.isfinite(f_stat) else 0.0
     theta = refined.x
     normalized = dict(zip(NORMALIZED_NAMES, (float(v) for v in theta), strict=True))
-    cov = (sse_bw / dof) * np.linalg.pinv(refined.jac.T @ refined.jac, rcond=1e-12)
-    std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    cov = regression_covariance(refined.jac, sse_bw / dof)
+    std = np.sqrt(np.diag(cov))
     relative_std = {
         name: float(s / abs(v)) if v != 0 else float("inf")
         for name, s, v in zip(NORMALIZED_NAMES, std, theta, strict=True)
@@ -424,6 +436,8 @@ def _assess(
         linear=linear,
         normalized=normalized,
         relative_std=relative_std,
+        standard_errors=dict(zip(NORMALIZED_NAMES, (float(v) for v in std), strict=True)),
+        covariance=cov if np.all(np.isfinite(cov)) else None,
         p_value=p_value,
         fit_percent=fit,
         linear_fit_percent=float(fit_percent(x, x + lin.fun)),

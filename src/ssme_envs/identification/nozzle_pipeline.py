@@ -19,11 +19,17 @@ import scipy.signal
 
 from ssme_envs.identification.bouc_wen import (
     DEFAULT_NORMALIZATION_A,
+    NORMALIZED_NAMES,
     BoucWenFit,
     check_torque_record,
     fit_bouc_wen,
 )
 from ssme_envs.identification.metrics import fit_percent
+from ssme_envs.identification.nozzle_uncertainty import (
+    DEFAULT_REPLICATES,
+    BootstrapUncertainty,
+    dsr_e_uncertainty,
+)
 from ssme_envs.identification.records import read_columns, write_columns
 from ssme_envs.identification.subspace import InnovationsModel, SubspaceResult, dsr_e, second_order_parameters
 from ssme_envs.models.nozzle import (
@@ -36,6 +42,7 @@ from ssme_envs.models.nozzle import (
     recommended_substeps,
     simulate_nozzle,
 )
+from ssme_envs.models.uncertainty import ParameterUncertainty
 from ssme_envs.signals import prbs
 
 DEFAULT_SEED = 7
@@ -43,6 +50,10 @@ BENCH_SAMPLES = 7476  # the paper's N at Ts = 0.008 s (59.8 s)
 DECIMATION = round(BENCH_RATE_HZ * NOZZLE_DT)  # 20
 SENSOR_NOISE = 1e-4  # rad, std of the angle sensor at 2.5 kHz (an assumption: 0.006 deg)
 RANGE_DEG = 3.0
+BOUC_WEN_METHOD = (
+    "regression covariance s^2 (J^T J)^-1 of the output-error fit at the optimum: J the "
+    "forward-difference Jacobian of the simulated angle, s^2 = SSE / (N - 7)"
+)
 
 
 @dataclass
@@ -99,6 +110,23 @@ def bench_experiment(
     torque_limit : float
         Actuator torque limit, N m.
     """
+    tau, angle = bench_motion(params, samples, n_bits, clock, range_deg, torque_limit)
+    return NozzleRecord(tau, acquire(angle, seed, noise_std), NOZZLE_DT)
+
+
+def bench_motion(
+    params: NozzleParameters,
+    samples: int = BENCH_SAMPLES,
+    n_bits: int = 12,
+    clock: int = 2,
+    range_deg: float = RANGE_DEG,
+    torque_limit: float = DEFAULT_TORQUE_LIMIT,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The bench's torque at Ts = 0.008 s (N m) and the true angle at the bench rate (rad).
+
+    The noise-free half of :func:`bench_experiment` (same arguments); :func:`acquire` adds the
+    rest, so that many noise seeds can share one simulation.
+    """
     if samples < 50:
         raise ValueError(f"samples must be at least 50, got {samples}")
     if not range_deg > 0:
@@ -114,9 +142,14 @@ def bench_experiment(
     angle = simulate_nozzle(
         params, np.repeat(tau, DECIMATION), dt=fast_dt, substeps=1, torque_limit=torque_limit
     )
+    return tau, angle
+
+
+def acquire(angle: np.ndarray, seed: int = DEFAULT_SEED, noise_std: float = SENSOR_NOISE) -> np.ndarray:
+    """The measured angle at Ts: sensor noise (std ``noise_std`` rad, seeded) added at the bench
+    rate, then the anti-alias FIR filter (zero phase) and decimation by 20."""
     measured = angle + noise_std * np.random.default_rng(seed).standard_normal(angle.size)
-    beta = scipy.signal.decimate(measured, DECIMATION, ftype="fir", zero_phase=True)
-    return NozzleRecord(tau, beta, NOZZLE_DT)
+    return scipy.signal.decimate(measured, DECIMATION, ftype="fir", zero_phase=True)
 
 
 def validation_experiment(params: NozzleParameters, seed: int = DEFAULT_SEED + 1) -> NozzleRecord:
@@ -147,6 +180,12 @@ class NozzleIdentification:
     model: NozzleModel
     subspace: SubspaceResult
     bouc_wen: BoucWenFit
+    linear_uncertainty: BootstrapUncertainty | None = None
+
+
+def _finite_or_none(values: dict[str, float]) -> dict[str, float | None]:
+    """JSON has no inf: an undetermined parameter's standard error is written as null."""
+    return {key: (float(v) if np.isfinite(v) else None) for key, v in values.items()}
 
 
 def identify_nozzle(
@@ -154,12 +193,24 @@ def identify_nozzle(
     seed: int = 0,
     workers: int = 2,
     normalization_A: float = DEFAULT_NORMALIZATION_A,
+    replicates: int = DEFAULT_REPLICATES,
 ) -> NozzleIdentification:
-    """DSR_e second-order linear model (as in the paper, for J, b, k) and the Bouc-Wen joint fit."""
+    """DSR_e second-order linear model (as in the paper, for J, b, k) and the Bouc-Wen joint fit.
+
+    With the standard errors of J, b, k from a residual bootstrap of ``replicates`` records
+    (:func:`dsr_e_uncertainty`, seeded by ``seed``; 0: none) and those of the Bouc-Wen joint's
+    normalized parameters from the fit's regression covariance, both in the model's
+    ``uncertainty`` blocks.
+    """
     check_torque_record(record.tau, record.beta, names=(record.input_name, record.output_name))
     subspace = dsr_e(record.tau, record.beta, record.dt, order=2)
     linear = subspace.model
     tf = second_order_parameters(linear)
+    boot = None
+    if replicates:
+        boot = dsr_e_uncertainty(
+            record.tau, record.beta, record.dt, subspace, replicates=replicates, seed=seed, workers=workers
+        )
     bw = fit_bouc_wen(
         record.tau, record.beta, record.dt, seed=seed, workers=workers, normalization_A=normalization_A
     )
@@ -176,12 +227,25 @@ def identify_nozzle(
             "resonance_frequency_hz": tf["resonance_frequency_hz"],
             "damping_ratio": tf["damping_ratio"],
             "fit_percent": float(fit_percent(record.beta, sim_linear)),
+            **(
+                {}
+                if boot is None
+                else {
+                    "standard_errors": boot.as_dict(),
+                    "bootstrap": {
+                        "replicates": len(boot.replicates),
+                        "failed": boot.failed,
+                        "noise_std": boot.noise_std,
+                    },
+                }
+            ),
         },
         "bouc_wen": {
             "determined": bw.determined,
             "reason": bw.reason,
             "normalized": bw.normalized,
-            "relative_std": bw.relative_std,
+            "standard_errors": _finite_or_none(bw.standard_errors),
+            "relative_std": _finite_or_none(bw.relative_std),
             "p_value": bw.p_value,
             "normalization": f"A = {bw.normalization_A:g}",
             "fit_percent": bw.fit_percent,
@@ -206,8 +270,14 @@ def identify_nozzle(
         fit=fit,
         input_name=record.input_name,
         output_name=record.output_name,
+        linear_uncertainty=None if boot is None else boot.parameter_uncertainty(),
+        bouc_wen_uncertainty=(
+            ParameterUncertainty(NORMALIZED_NAMES, bw.covariance, BOUC_WEN_METHOD, int(record.tau.size))
+            if bw.determined and bw.covariance is not None
+            else None
+        ),
     )
-    return NozzleIdentification(model, subspace, bw)
+    return NozzleIdentification(model, subspace, bw, boot)
 
 
 def simulate_joint(joint: NozzleParameters, record: NozzleRecord) -> np.ndarray:

@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 import scipy.signal
 
+from ssme_envs.identification.bouc_wen import BoucWenFit
 from ssme_envs.identification.metrics import fit_percent
 from ssme_envs.identification.nozzle_pipeline import (
     NozzleIdentification,
@@ -136,6 +137,54 @@ def parameter_row(name: str, p: NozzleParameters | None) -> str:
     )
 
 
+def standard_error_row(ident: NozzleIdentification) -> str:
+    """The parameter table's row with the standard errors of the identified J, b, k."""
+    se = ident.linear_uncertainty.as_dict()
+    return f"| standard error (bootstrap) | {se['J']:.2g} | {se['b']:.2g} | {se['k']:.2g} | | | | | |"
+
+
+def _uncertainty_note(ident: NozzleIdentification) -> list[str]:
+    boot = ident.linear_uncertainty
+    if boot is None:
+        return []
+    return [
+        f"Standard errors of J, b, k: {boot.method}. They measure the scatter the sensor noise causes "
+        "(noise std on the record "
+        f"{boot.noise_std:.3g} rad), not the systematic error of a second-order model of this record "
+        "(a hysteretic joint's linearization, a decimation filter's distortion).",
+        "",
+    ]
+
+
+def _bouc_wen_section(bw: BoucWenFit) -> list[str]:
+    """Verdict, and the normalized parameters with their standard errors only when determined."""
+    fits = (
+        f"Simulation fit {bw.fit_percent:.2f} % (a linear joint fitted the same way: "
+        f"{bw.linear_fit_percent:.2f} %)."
+    )
+    if not bw.determined:
+        return [f"Bouc-Wen fit: {fits} No Bouc-Wen parameters are reported: {bw.reason}.", ""]
+    rows = []
+    for name, value in bw.normalized.items():
+        se, rel = bw.standard_errors[name], bw.relative_std[name]
+        rows.append(f"| {name} | {value:.6g} | {se:.2g} | {rel:.2g} |")
+    return [
+        f"Bouc-Wen fit: {bw.reason}. {fits}",
+        "",
+        "A, beta, gamma and (1 - a) k are not jointly identifiable (scaling z leaves the motion unchanged); "
+        "the fit estimates k_el = a k, k_hys = (1 - a) k A, beta_n = beta A^(n-1), gamma_n = gamma A^(n-1) "
+        "and n, and the Table 1 form above fixes A. Estimated (normalized) parameters with their standard "
+        "errors (regression covariance s^2 (J^T J)^-1 of the output-error fit, s^2 = SSE / (N - 7); "
+        "s^2 counts any model error in the residual as noise, and like the linear model's they do not "
+        "cover systematic errors):",
+        "",
+        "| parameter | value | standard error | relative |",
+        "|---|---|---|---|",
+        *rows,
+        "",
+    ]
+
+
 def write_nozzle_report(
     out_dir: Path,
     ident: NozzleIdentification,
@@ -171,6 +220,7 @@ def write_nozzle_report(
         parameter_row(
             "identified linear (DSR_e, eq 5 form)", NozzleParameters.linear(lin["J"], lin["b"], lin["k"])
         ),
+        *([standard_error_row(ident)] if ident.linear_uncertainty is not None else []),
         parameter_row("paper, nonlinear row (Table 1)", published_nozzle("bouc_wen")),
     ]
     if truth is not None:
@@ -178,17 +228,8 @@ def write_nozzle_report(
     lines += [
         parameter_row(f"identified Bouc-Wen (normalization A = {bw.normalization_A:g})", bw.params),
         "",
-        f"Bouc-Wen fit: {bw.reason}. Simulation fit {bw.fit_percent:.2f} % (a linear joint fitted the same "
-        f"way: {bw.linear_fit_percent:.2f} %).",
-        "",
-        "A, beta, gamma and (1 - a) k are not jointly identifiable (scaling z leaves the motion unchanged); "
-        "the fit estimates k_el = a k, k_hys = (1 - a) k A, beta A^(n-1), gamma A^(n-1) and n, and the "
-        "Table 1 form above fixes A. Estimated (normalized) parameters with relative standard errors:",
-        "",
-        "| parameter | value | relative std |",
-        "|---|---|---|",
-        *(f"| {k} | {v:.6g} | {bw.relative_std[k]:.2g} |" for k, v in bw.normalized.items()),
-        "",
+        *_uncertainty_note(ident),
+        *_bouc_wen_section(bw),
         "## Figures",
         "",
     ]
