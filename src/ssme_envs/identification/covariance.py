@@ -73,16 +73,11 @@ def parameter_uncertainty(fit: _Fit, y: np.ndarray, method: str) -> ParameterUnc
 def markov_standard_errors(model: AlphaCanonicalModel, count: int) -> tuple[np.ndarray, np.ndarray]:
     """Markov parameters ``C A^k B`` (k < count) and their standard errors by the delta method on
     the model's parameter covariance; both of shape (count, p, m)."""
-    if model.uncertainty is None:
-        raise ValueError("the model has no uncertainty block")
-    names = model.parameter_names()
-    rows = [names.index(name) for name in model.uncertainty.parameters]
+    rows = model.uncertain_rows()
     mean = model.parameter_vector()
 
     def markov(values: np.ndarray) -> np.ndarray:
-        full = mean.copy()
-        full[rows] = values
-        return model.with_parameters(full).markov_parameters(count).ravel()
+        return model.with_parameters(model.filled(values)).markov_parameters(count).ravel()
 
     cov = model.uncertainty.propagate(markov, mean[rows])
     shape = (count, model.n_outputs, model.n_inputs)

@@ -303,17 +303,24 @@ class AlphaCanonicalModel:
 
     def sample(self, rng: np.random.Generator, count: int) -> list[AlphaCanonicalModel]:
         """``count`` models with parameters drawn from the uncertainty block (Gaussian)."""
-        if self.uncertainty is None:
-            raise ValueError("the model has no uncertainty block to draw from")
-        names = self.parameter_names()
-        rows = [names.index(name) for name in self.uncertainty.parameters]
+        rows = self.uncertain_rows()
         mean = self.parameter_vector()
-        out = []
-        for draw in self.uncertainty.draws(mean[rows], rng, count):
-            values = mean.copy()
-            values[rows] = draw
-            out.append(self.with_parameters(values))
-        return out
+        return [
+            self.with_parameters(self.filled(draw)) for draw in self.uncertainty.draws(mean[rows], rng, count)
+        ]
+
+    def uncertain_rows(self) -> list[int]:
+        """Positions in :meth:`parameter_vector` of the parameters the uncertainty block covers."""
+        if self.uncertainty is None:
+            raise ValueError("the model has no uncertainty block")
+        names = self.parameter_names()
+        return [names.index(name) for name in self.uncertainty.parameters]
+
+    def filled(self, values: np.ndarray) -> np.ndarray:
+        """The full parameter vector with the uncertain ones replaced by ``values``."""
+        full = self.parameter_vector()
+        full[self.uncertain_rows()] = values
+        return full
 
     def alpha_canonical_residual(self) -> float:
         """Largest violation of eqs 5-8 with ``C = H [0 I]`` (0 for a model exactly in the form)."""
