@@ -121,7 +121,7 @@ def weak_mode_record(seed: int, samples: int = 1200, noise: float = 0.01):
     return u, y + noise * y.std(axis=0) * rng.standard_normal(y.shape), (a, b, c)
 
 
-@pytest.mark.parametrize("seed", range(8))
+@pytest.mark.parametrize("seed", range(12))
 def test_a_weakly_observable_mode_is_kept_by_default(seed):
     u, y, (a, b, c) = weak_mode_record(seed)
     assert observability_indices(a, c) == (2, 2)
@@ -130,10 +130,8 @@ def test_a_weakly_observable_mode_is_kept_by_default(seed):
     # the rank rule alone cuts the weak mode: its largest cut ratio is about 0.02-0.06
     assert search.rank_rule == (1, 1)
     assert 0.01 < max(r for *_, r, kept in search.ratios if not kept) < 0.1
-    # never the rank rule's under-fit; (2, 2) on most seeds, one state more on others (the IV
-    # estimate of the weak mode is noisy enough that a larger model simulates held-out data better)
-    chosen = result.model.observability_indices
-    assert all(c >= 2 for c in chosen) and sum(chosen) <= 5, chosen
+    # the held-out comparison of output-error refined contenders restores it
+    assert result.model.observability_indices == (2, 2), search.summary()
     want = markov(a, b, c, 20)
     got = markov(result.model.A, result.model.B, result.model.C, 20)
     assert np.max(np.abs(got - want)) < 0.05 * np.max(np.abs(want))

@@ -5,7 +5,9 @@ Any number of inputs and outputs and any observability indices. The steps:
 1. **Structure** (eqs 28-33): the row-by-row rank search of :mod:`.structure`, then a choice
    among the index sets one or two rank decisions away: each is fitted on the first two thirds
    of the record and scored by the BIC of its simulation error on the last third (the search
-   holds every candidate, the runner-up and the margin).
+   holds every candidate, the runner-up and the margin). The contenders close to the best are
+   first refined on their simulation error (:mod:`.output_error`), so that a noisy estimate of a
+   weak mode does not hand the choice to a larger structure.
 
 2. **Parameters** (eq 27). Each output's one-step equation ``y_i(k) = theta_i phi_i(k)`` is
    solved by least squares with only the regressors eq 8 leaves free, plus a constant, plus
@@ -39,7 +41,7 @@ import numpy as np
 import scipy.linalg
 
 from ssme_envs.identification.covariance import parameter_uncertainty
-from ssme_envs.identification.metrics import filter_prediction
+from ssme_envs.identification.output_error import held_out_criterion, linear_response, refine_contenders
 from ssme_envs.identification.structure import (
     DEFAULT_MAX_INDEX,
     DEFAULT_RANK_TOL,
@@ -50,10 +52,8 @@ from ssme_envs.identification.structure import (
 )
 from ssme_envs.identification.structure import estimate_indices as structure_search
 from ssme_envs.models.engine import TruthConfig, simulate
-from ssme_envs.models.statespace import AlphaCanonicalModel, AlphaStructure, asymmetric_gain, check_dt
+from ssme_envs.models.statespace import AlphaCanonicalModel, AlphaStructure, check_dt
 
-# Simulation errors below this fraction of an output's spread are round-off (exact fits).
-CRITERION_FLOOR = 1e-10
 # Share of the record the candidate structures are fitted on; the rest scores them.
 ESTIMATION_SHARE = 2 / 3
 IV_PASSES = 2
@@ -204,21 +204,6 @@ def _simulation_error(
     return float(np.sum((y - simulated) ** 2)), simulated
 
 
-def linear_response(model: AlphaCanonicalModel, u: np.ndarray) -> np.ndarray:
-    """Zero-state response to ``u`` (eq 36 applied), by transfer-function filters (compiled loops:
-    the identification simulates every candidate model several times)."""
-    import scipy.signal  # heavy import, needed only here
-
-    u_star = asymmetric_gain(u, model.lam)
-    out = np.zeros((u.shape[0], model.n_outputs))
-    d = np.zeros((model.n_outputs, 1))
-    for j in range(model.n_inputs):
-        num, den = scipy.signal.ss2tf(model.A, model.B[:, j : j + 1], model.C, d)
-        for i in range(model.n_outputs):
-            out[:, i] += scipy.signal.lfilter(num[i], den, u_star[:, j])
-    return out
-
-
 @dataclass
 class _Fit:
     """One structure fitted: the model and what its covariance needs."""
@@ -317,27 +302,6 @@ def _fit(
     return fit
 
 
-def _held_out_criterion(
-    model: AlphaCanonicalModel, parameters: int, u: np.ndarray, y: np.ndarray, split: int, simulation: bool
-) -> tuple[float, tuple[float, ...]]:
-    """BIC-like score of a model fitted on the samples before ``split``, on the samples after it:
-    N sum_i log(mse_i) + parameters log N, with mse_i the mean squared simulation error of output i
-    (the filter's one-step error when ``simulation`` is off, for unstable plants), floored at
-    round-off so that exact fits tie and the smaller model wins."""
-    if simulation:
-        if model.spectral_radius() >= 1.0:
-            return float("inf"), ()
-        predicted = linear_response(model, u)
-    else:
-        predicted = filter_prediction(model, u, y)
-    err = (y - predicted)[split:]
-    n = err.shape[0]
-    mse = np.mean(err**2, axis=0)
-    floor = (CRITERION_FLOOR * np.std(y, axis=0)) ** 2
-    score = float(n * np.sum(np.log(np.maximum(mse, floor))) + parameters * np.log(n))
-    return score, tuple(np.sqrt(mse).tolist())
-
-
 def identify(
     u: np.ndarray,
     y: np.ndarray,
@@ -415,7 +379,7 @@ def identify(
                     cand.note = str(exc)
                     return cand
                 cand.parameters = sum(theta.size for theta in fitted.thetas)
-                cand.criterion, cand.rms_error = _held_out_criterion(
+                cand.criterion, cand.rms_error = held_out_criterion(
                     fitted.model, cand.parameters, u, y, split, simulation
                 )
                 if not np.isfinite(cand.criterion):
@@ -423,6 +387,8 @@ def identify(
                 return cand
 
             explore(search, score)
+            if simulation:
+                refine_contenders(search, {i: f.model for i, f in fits.items()}, u, y, split)
             kind = "simulation" if simulation else "one-step prediction"
             search.criterion = f"BIC of the {kind} error on the last {u.shape[0] - split} samples"
         fit = _fit(AlphaStructure.from_indices(search.indices), u, y, dt, method, asymmetric, names)
