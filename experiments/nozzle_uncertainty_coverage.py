@@ -7,6 +7,9 @@ the same sensor noise:
 
 * **bench**: the bench as ``bench_experiment`` simulates it (noise at 2.5 kHz, anti-alias FIR
   filter, decimation by 20);
+* **bench, bias-corrected**: the bench's estimates minus the acquisition chain's bias at the
+  estimate (``acquisition_bias``, what ``identify_nozzle(bench_acquisition=True)`` does; the
+  standard errors are the bench's);
 * **ideal sampler**: the same decimated noise added to the exact samples of the angle at
   Ts = 0.008 s (no anti-alias filter acting on the motion), which the second-order ZOH model
   describes exactly.
@@ -16,6 +19,7 @@ Then the Bouc-Wen fit's regression standard errors on Table 1's Bouc-Wen joint o
 experiments/results/nozzle_uncertainty_coverage.md.
 
     python experiments/nozzle_uncertainty_coverage.py [--seeds 200] [--bouc-wen-seeds 12]
+        [--acquisitions bench,ideal]
 """
 
 from __future__ import annotations
@@ -39,6 +43,7 @@ from ssme_envs.identification.nozzle_pipeline import (  # noqa: E402
     DECIMATION,
     SENSOR_NOISE,
     acquire,
+    acquisition_bias,
     bench_motion,
 )
 from ssme_envs.identification.nozzle_uncertainty import (  # noqa: E402
@@ -53,7 +58,8 @@ OUT = Path(__file__).resolve().parent / "results" / "nozzle_uncertainty_coverage
 Z95 = 1.959963984540054
 SEED_OFFSET = 1000  # noise seeds SEED_OFFSET, SEED_OFFSET + 1, ...
 INNOVATIONS_SEEDS = 50  # seeds on which the noise="innovations" variant is compared
-ACQUISITIONS = ("bench", "ideal sampler")
+MEASURED = {"bench": "bench", "ideal": "ideal sampler"}  # --acquisitions: name in the tables
+CORRECTED = "bench, bias-corrected"
 
 _MOTION: dict[str, np.ndarray] = {}
 
@@ -65,23 +71,31 @@ def measured(angle: np.ndarray, seed: int, acquisition: str) -> np.ndarray:
     return angle[::DECIMATION] + acquire(np.zeros_like(angle), seed)
 
 
-def linear_seed(job: tuple[int, int]) -> dict[str, np.ndarray]:
-    """Estimates and standard errors of J, b, k for one noise seed, both acquisitions."""
-    seed, replicates = job
+def linear_seed(job: tuple[int, int, tuple[str, ...]]) -> dict[str, np.ndarray]:
+    """Estimates and standard errors of J, b, k for one noise seed, each acquisition."""
+    seed, replicates, acquisitions = job
     tau, angle = _MOTION["tau"], _MOTION["angle"]
     out = {}
-    for acquisition in ACQUISITIONS:
+    for acquisition in acquisitions:
         y = measured(angle, seed, acquisition)
         result = dsr_e(tau, y, NOZZLE_DT, order=2)
         params = second_order_parameters(result.model)
         boot = dsr_e_uncertainty(tau, y, NOZZLE_DT, result, replicates=replicates, seed=seed)
-        out[acquisition] = np.array([[params[p] for p in PARAMETERS], boot.standard_errors])
-        out[f"{acquisition} seconds"] = np.array(boot.seconds)
+        name = MEASURED[acquisition]
+        out[name] = np.array([[params[p] for p in PARAMETERS], boot.standard_errors])
+        out[f"{name} seconds"] = np.array(boot.seconds)
         if seed - SEED_OFFSET < INNOVATIONS_SEEDS:
             other = dsr_e_uncertainty(
                 tau, y, NOZZLE_DT, result, replicates=replicates, seed=seed, noise="innovations"
             )
-            out[f"{acquisition} innovations"] = other.standard_errors
+            out[f"{name} innovations"] = other.standard_errors
+        if acquisition == "bench":
+            bias = acquisition_bias(tau, tuple(params[p] for p in PARAMETERS))
+            corrected = [params[p] - bias[p] for p in PARAMETERS]
+            out[CORRECTED] = np.array([corrected, boot.standard_errors])
+            out[f"{CORRECTED} seconds"] = out["bench seconds"]
+            if "bench innovations" in out:
+                out[f"{CORRECTED} innovations"] = out["bench innovations"]
     return out
 
 
@@ -113,13 +127,13 @@ def coverage_table(names, truth, estimates: np.ndarray, ses: np.ndarray) -> list
     return lines
 
 
-def linear_section(seeds: int, replicates: int, workers: int) -> list[str]:
+def linear_section(seeds: int, replicates: int, workers: int, acquisitions: tuple[str, ...]) -> list[str]:
     truth_params = published_nozzle("linear")
     truth = np.array([truth_params.J, truth_params.b, truth_params.k])
     tau, angle = bench_motion(truth_params)
     _MOTION.update(tau=tau, angle=angle)
     start = time.perf_counter()
-    jobs = [(SEED_OFFSET + s, replicates) for s in range(seeds)]
+    jobs = [(SEED_OFFSET + s, replicates, acquisitions) for s in range(seeds)]
     with multiprocessing.get_context("fork").Pool(workers) as pool:
         runs = []
         for k, run in enumerate(pool.imap(linear_seed, jobs), 1):
@@ -138,15 +152,16 @@ def linear_section(seeds: int, replicates: int, workers: int) -> list[str]:
         "with its 95 % Wilson range.",
         "",
     ]
-    for acquisition in ACQUISITIONS:
+    tables = [a for a in ("bench", CORRECTED, "ideal sampler") if a in runs[0]]
+    for acquisition in tables:
         est = np.array([r[acquisition][0] for r in runs])
         se = np.array([r[acquisition][1] for r in runs])
         secs = np.array([float(r[f"{acquisition} seconds"]) for r in runs])
-        what = (
-            "as `bench_experiment` makes it: anti-alias FIR filter and decimation by 20"
-            if acquisition == "bench"
-            else "the exact samples of the angle plus the same decimated sensor noise"
-        )
+        what = {
+            "bench": "as `bench_experiment` makes it: anti-alias FIR filter and decimation by 20",
+            CORRECTED: "the bench's estimates minus the acquisition bias simulated at each estimate",
+            "ideal sampler": "the exact samples of the angle plus the same decimated sensor noise",
+        }[acquisition]
         lines += [
             f"### {acquisition}: {what}",
             "",
@@ -172,7 +187,7 @@ def linear_section(seeds: int, replicates: int, workers: int) -> list[str]:
     return lines
 
 
-def bouc_wen_section(seeds: int, workers: int) -> list[str]:
+def bouc_wen_section(seeds: int, workers: int, acquisitions: tuple[str, ...]) -> list[str]:
     truth_params = published_nozzle("bouc_wen")
     norm = truth_params.normalized()
     truth = np.array([norm[n] for n in NORMALIZED_NAMES])
@@ -201,7 +216,7 @@ def bouc_wen_section(seeds: int, workers: int) -> list[str]:
         f"seed, {workers} workers) over noise seeds {SEED_OFFSET}..{SEED_OFFSET + seeds - 1}:",
         "",
     ]
-    for acquisition in ACQUISITIONS:
+    for acquisition in acquisitions:
         est, se = [], []
         start = time.perf_counter()
         for s in range(seeds):
@@ -211,7 +226,7 @@ def bouc_wen_section(seeds: int, workers: int) -> list[str]:
             se.append([fit.standard_errors[n] for n in NORMALIZED_NAMES])
         print(f"  Bouc-Wen, {acquisition}: {time.perf_counter() - start:.0f} s", flush=True)
         lines += [
-            f"### {acquisition}",
+            f"### {MEASURED[acquisition]}",
             "",
             *coverage_table(NORMALIZED_NAMES, truth, np.array(est), np.array(se)),
             "",
@@ -225,8 +240,12 @@ def main() -> None:
     parser.add_argument("--replicates", type=int, default=DEFAULT_REPLICATES)
     parser.add_argument("--bouc-wen-seeds", type=int, default=12)
     parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--acquisitions", default="bench,ideal", help="comma-separated: bench, ideal")
     parser.add_argument("--out", type=Path, default=OUT)
     args = parser.parse_args()
+    chosen = tuple(a.strip() for a in args.acquisitions.split(","))
+    if not chosen or any(a not in MEASURED for a in chosen):
+        parser.error(f"--acquisitions takes a comma-separated subset of {', '.join(MEASURED)}")
     start = time.perf_counter()
     lines = [
         "# Coverage of the nozzle's standard errors",
@@ -235,11 +254,12 @@ def main() -> None:
         + (f" --seeds {args.seeds}" if args.seeds != 200 else "")
         + (f" --replicates {args.replicates}" if args.replicates != DEFAULT_REPLICATES else "")
         + (f" --bouc-wen-seeds {args.bouc_wen_seeds}" if args.bouc_wen_seeds != 12 else "")
+        + (f" --acquisitions {args.acquisitions}" if chosen != tuple(MEASURED) else "")
         + "`.",
         "",
     ]
-    lines += linear_section(args.seeds, args.replicates, args.workers)
-    lines += bouc_wen_section(args.bouc_wen_seeds, args.workers)
+    lines += linear_section(args.seeds, args.replicates, args.workers, chosen)
+    lines += bouc_wen_section(args.bouc_wen_seeds, args.workers, chosen)
     lines += [f"Total time {time.perf_counter() - start:.0f} s on {args.workers} processes.", ""]
     args.out.write_text("\n".join(lines))
     print("\n".join(lines))

@@ -145,13 +145,26 @@ def standard_error_row(ident: NozzleIdentification) -> str:
 
 def _uncertainty_note(ident: NozzleIdentification) -> list[str]:
     boot = ident.linear_uncertainty
+    bias = ident.model.fit["dsr_e"].get("acquisition_bias")
+    lines = []
+    if bias is not None:
+        lines += [
+            "J, b, k are corrected for the bench's acquisition chain (anti-alias FIR filter and "
+            "decimation by 20), whose bias at the estimate was simulated: "
+            + ", ".join(f"{key} {-value:+.4g}" for key, value in bias.items())
+            + " (`acquisition_bias`); the DSR_e state-space model is what the data give.",
+            "",
+        ]
     if boot is None:
-        return []
+        return lines
     return [
+        *lines,
         f"Standard errors of J, b, k: {boot.method}. They measure the scatter the sensor noise causes "
         "(noise std on the record "
         f"{boot.noise_std:.3g} rad), not the systematic error of a second-order model of this record "
-        "(a hysteretic joint's linearization, a decimation filter's distortion).",
+        "(a hysteretic joint's linearization"
+        + ("" if bias is not None else ", a decimation filter's distortion")
+        + ").",
         "",
     ]
 
