@@ -1,8 +1,9 @@
 """Controllers behind one protocol (classical and reinforcement learning) for the ssme-envs plants.
 
 ``make_controller("lqi", env)`` designs a controller on the env's design model (the identified
-one; ``"lqi:truth"`` designs on the env's own plant instead). ``CONTROLLERS`` lists which
-controller serves which env.
+one; ``"lqi:truth"`` designs on the env's own plant instead); ``"ppo:RUN_DIR"`` (or ``sac:``,
+``td3:``) loads a policy trained by ``ssme-envs train``. ``CONTROLLERS`` lists which controller
+serves which env.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from agents.lqi import LQIServo, ScheduledLQI
 from agents.mpc import MPC
 from agents.pid import DecoupledPI, PlacedPID
 from agents.plants import DESIGN_SOURCES
+from agents.policy_files import ALGOS
 from agents.tvc import HysteresisCompensated
 
 TRACKING = "ssme_envs/EngineTracking-v0"
@@ -80,14 +82,31 @@ def controller_names(env_id: str) -> list[str]:
     return [name for name, (_, envs, _) in CONTROLLERS.items() if env_id in envs]
 
 
-def parse_controller(spec: str, env_id: str) -> Callable[[Any], Controller]:
-    """A factory ``env -> controller`` from ``name`` or ``name:design`` (design: identified,
-    truth; for ``ppo`` the plant the policy was trained on); ValueError naming the valid choices
-    otherwise."""
+def parse_controller(spec: str, env_id: str, allow_pickle: bool = False) -> Callable[[Any], Controller]:
+    """A factory ``env -> controller`` from a controller spec; ValueError naming the valid choices
+    otherwise.
+
+    Parameters
+    ----------
+    spec : str
+        ``name`` or ``name:design`` (design: identified, truth; for ``ppo`` the plant the shipped
+        policy was trained on), or ``algo:PATH`` (algo: ppo, sac, td3) for the run directory of
+        ``ssme-envs train`` (write ``ppo:./truth`` for a directory named like a design).
+    env_id : str
+        The env the controller is for.
+    allow_pickle : bool
+        Accept ``algo:FILE.zip``, an SB3 zip: it is unpickled on load, which can execute
+        arbitrary code.
+    """
     name, _, design = spec.partition(":")
+    if name in ALGOS and design and design not in DESIGN_SOURCES:
+        return _trained(name, design, env_id, allow_pickle)
     valid = controller_names(env_id)
     if name not in valid:
-        raise ValueError(f"unknown controller {spec!r} for {env_id}; choose from {', '.join(valid)}")
+        trained = ", ".join(f"{algo}:RUN_DIR" for algo in ALGOS)
+        raise ValueError(
+            f"unknown controller {spec!r} for {env_id}; choose from {', '.join(valid)} or {trained}"
+        )
     design = design or CONTROLLERS[name][2]
     if design not in DESIGN_SOURCES:
         raise ValueError(
@@ -97,9 +116,20 @@ def parse_controller(spec: str, env_id: str) -> Callable[[Any], Controller]:
     return lambda env: factory(env, design)
 
 
-def make_controller(spec: str, env: Any, env_id: str | None = None) -> Controller:
-    """The controller ``spec`` (``"lqi"``, ``"pi:truth"``, ``"ppo"``, ...) designed for ``env``."""
-    return parse_controller(spec, env_id or env_id_of(env))(env)
+def _trained(algo: str, path: str, env_id: str, allow_pickle: bool) -> Callable[[Any], Controller]:
+    """The factory of a trained policy, loaded (and checked) once, here."""
+    from agents.sb3 import PolicyController, load_trained
+
+    loaded = load_trained(path, algo, allow_pickle)
+    if loaded.env_id is not None and loaded.env_id != env_id:
+        raise ValueError(f"{path}: the {algo} policy was trained on {loaded.env_id}, not {env_id}")
+    return lambda env: PolicyController(loaded)
+
+
+def make_controller(spec: str, env: Any, env_id: str | None = None, allow_pickle: bool = False) -> Controller:
+    """The controller ``spec`` (``"lqi"``, ``"pi:truth"``, ``"ppo"``, ``"sac:RUN_DIR"``, ...)
+    designed for ``env`` (see :func:`parse_controller`)."""
+    return parse_controller(spec, env_id or env_id_of(env), allow_pickle)(env)
 
 
 __all__ = [

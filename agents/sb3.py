@@ -1,9 +1,12 @@
 """Reinforcement learning with stable-baselines3: training from a TOML config, and trained
 policies (ours, shipped with the package, or yours) as controllers of the common protocol.
 
-A run writes ``model.zip`` (the best evaluation's policy, SB3's format), ``normalization.json``
-(the observation statistics of VecNormalize at that evaluation, plain JSON), ``config.toml`` (the
-resolved config that reproduces the run) and ``training.json`` (steps, wall-clock, evaluations).
+A run writes ``policy.json`` and ``policy.safetensors`` (the kept policy: architecture, spaces and
+weights, see :mod:`agents.policy_files`), ``normalization.json`` (VecNormalize's observation
+statistics with that policy; :func:`to_vec_normalize` makes SB3's VecNormalize of it),
+``config.toml`` (the resolved config that reproduces the run) and ``training.json`` (steps,
+wall-clock, evaluations, which policy was kept). Nothing is pickled; SB3's own ``.zip`` loads
+only with ``allow_pickle=True``.
 """
 
 from __future__ import annotations
@@ -14,6 +17,7 @@ import json
 import math
 import sys
 import time
+import warnings
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -21,13 +25,26 @@ from typing import Any
 import numpy as np
 
 from agents.base import BatchController
+from agents.policy_files import (
+    ALGOS,
+    NORMALIZATION,
+    POLICY_JSON,
+    WEIGHTS,
+    LoadedPolicy,
+    load_policy,
+    save_normalization,
+    save_policy,
+    to_vec_normalize,
+    write_atomic,
+)
+from agents.policy_files import algorithm_class as _algorithm
+from agents.policy_zip import load_sb3_zip
 
 try:
     import tomllib
 except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib
 
-ALGOS = ("ppo", "sac", "td3")
 CONFIG_KEYS = {
     "env": str,
     "algo": str,
@@ -45,18 +62,6 @@ DEFAULTS = {"steps": 200_000, "seed": 0, "num_envs": 64, "eval_freq": 50_000, "e
             "tensorboard": False, "env_options": {}, "hyperparameters": {}, "policy": {}}  # fmt: skip
 # the shipped policies: trained on each env's full truth, and on EngineTracking's identified model
 SHIPPED = ("EngineTracking-v0", "EngineTracking-v0-identified", "EngineThrottle-v0", "NozzleTVC-v0")
-
-
-def _algorithm(name: str) -> Any:
-    if name not in ALGOS:
-        raise ValueError(f"unknown algo {name!r}; choose one of {', '.join(ALGOS)}")
-    try:
-        import stable_baselines3
-    except ModuleNotFoundError:
-        raise ValueError(
-            'RL training and trained policies need stable-baselines3: pip install "ssme-envs[rl]"'
-        ) from None
-    return getattr(stable_baselines3, name.upper())
 
 
 def check_config(config: dict[str, Any], source: str = "config") -> dict[str, Any]:
@@ -124,11 +129,77 @@ def _toml(config: dict[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def plan_steps(config: dict[str, Any]) -> tuple[int, dict[str, Any], str | None]:
+    """The steps SB3 will train, the hyperparameters and a note when they differ from ``steps``.
+
+    SB3 trains in whole collections: PPO in rollouts of ``n_steps`` per env, SAC and TD3 in
+    ``train_freq`` steps per env. PPO's ``n_steps``, when the config does not set it, is fitted
+    (at most SB3's default 2048) so that whole rollouts come close to ``steps``; the steps are
+    then rounded up to whole collections.
+
+    Parameters
+    ----------
+    config : dict
+        A checked config (:func:`check_config`).
+
+    Returns
+    -------
+    steps, hyperparameters, note
+        The steps to train, the hyperparameters (``n_steps`` added when fitted), and a line
+        saying how the steps were rounded (None when they are the ones asked).
+    """
+    algo, asked, n = config["algo"], config["steps"], config["num_envs"]
+    hyper = dict(config["hyperparameters"])
+    defaults = inspect.signature(_algorithm(algo).__init__).parameters
+    fitted = ""
+    if algo == "ppo":
+        if "n_steps" not in hyper:
+            default = defaults["n_steps"].default
+            rollouts = math.ceil(asked / (default * n))
+            n_steps = max(math.ceil(asked / (rollouts * n)), 2 if n == 1 else 1)
+            batch = int(hyper.get("batch_size", defaults["batch_size"].default))
+            multiple = batch // math.gcd(batch, n)  # whole minibatches per rollout where it costs little
+            if n_steps >= multiple:
+                n_steps = math.ceil(n_steps / multiple) * multiple
+            hyper["n_steps"] = n_steps
+            fitted = f" (n_steps {n_steps} fitted to the steps asked; set hyperparameters.n_steps to choose)"
+        unit, what = int(hyper["n_steps"]) * n, f"rollouts of n_steps {hyper['n_steps']} x {n} envs"
+    else:
+        freq = hyper.get("train_freq", defaults["train_freq"].default)
+        if not isinstance(freq, int):
+            raise ValueError(f"hyperparameters: train_freq must be an integer number of steps, got {freq!r}")
+        unit, what = freq * n, f"collections of train_freq {freq} x {n} envs"
+    unit = max(unit, 1)  # a zero n_steps or train_freq: SB3 names it when the model is made
+    steps = math.ceil(asked / unit) * unit
+    note = None
+    if steps != asked or fitted:
+        note = f"{algo} trains in whole {what}: {steps:,} steps for the {asked:,} asked{fitted}"
+    return steps, hyper, note
+
+
 def train(config: dict[str, Any], out: Path, progress: bool = True) -> dict[str, Any]:
     """Train on the env's native vector env through the SB3 adapter, observations (and rewards)
-    normalized by VecNormalize, the best evaluation kept. Returns the training summary."""
-    from stable_baselines3.common.callbacks import BaseCallback, EvalCallback
-    from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
+    normalized by VecNormalize, and keep the policy of the best evaluation (the final policy
+    is evaluated too). Writes ``policy.json``, ``policy.safetensors``, ``normalization.json``,
+    ``config.toml`` and ``training.json`` into ``out`` (no pickle, no zip).
+
+    Parameters
+    ----------
+    config : dict
+        The run's config (checked here; see :data:`CONFIG_KEYS`).
+    out : Path
+        The run directory (created).
+    progress : bool
+        Show SB3's progress bar (tqdm and rich) and print the evaluations, on stderr.
+
+    Returns
+    -------
+    dict
+        The training summary written to ``training.json``.
+    """
+    from stable_baselines3.common.callbacks import BaseCallback
+    from stable_baselines3.common.evaluation import evaluate_policy
+    from stable_baselines3.common.vec_env import VecMonitor, VecNormalize, sync_envs_normalization
 
     from ssme_envs.envs.sb3_adapter import make_sb3_vec_env
     from ssme_envs.evaluation import check_env_id
@@ -136,12 +207,13 @@ def train(config: dict[str, Any], out: Path, progress: bool = True) -> dict[str,
     config = check_config(config)
     check_env_id(config["env"])
     if config["tensorboard"] and importlib.util.find_spec("tensorboard") is None:
-        raise ValueError("TensorBoard logs need the tensorboard package: pip install tensorboard")
+        raise ValueError('TensorBoard logs need the tensorboard package: pip install "ssme-envs[rl]"')
+    steps, hyper, note = plan_steps(config)
+    config = {**config, "hyperparameters": hyper}  # config.toml records a fitted n_steps
+    bar = progress and all(importlib.util.find_spec(m) is not None for m in ("tqdm", "rich"))
     out.mkdir(parents=True, exist_ok=True)
-    algorithm = _algorithm(config["algo"])
-    env_id, seed, n = config["env"], config["seed"], config["num_envs"]
+    algo, env_id, seed, n = config["algo"], config["env"], config["seed"], config["num_envs"]
     options = config["env_options"]
-    hyper = dict(config["hyperparameters"])
     try:
         venv = VecNormalize(
             VecMonitor(make_sb3_vec_env(env_id, n, seed, **options)), gamma=hyper.get("gamma", 0.99)
@@ -155,117 +227,139 @@ def train(config: dict[str, Any], out: Path, progress: bool = True) -> dict[str,
         raise ValueError(f"env_options: {exc}") from None
     policy_kwargs = {"net_arch": config["policy"]["net_arch"]} if config["policy"] else None
     try:
-        model = algorithm(
+        model = _algorithm(algo)(
             "MlpPolicy", venv, seed=seed, device="cpu", verbose=0, policy_kwargs=policy_kwargs,
             tensorboard_log=str(out / "tensorboard") if config["tensorboard"] else None, **hyper,
         )  # fmt: skip
     except (AssertionError, ValueError) as exc:  # SB3 checks hyperparameter values with asserts
         raise ValueError(f"hyperparameters: {exc}") from None
-    history: list[dict[str, float]] = []
+    history: list[dict[str, Any]] = []
+    best: dict[str, Any] = {"return": -math.inf}
 
-    class SaveNormalization(BaseCallback):
+    def evaluate_now() -> None:
+        sync_envs_normalization(venv, evaluation)
+        mean, _ = evaluate_policy(model, evaluation, n_eval_episodes=config["eval_episodes"], warn=False)
+        entry: dict[str, Any] = {"steps": int(model.num_timesteps), "return": float(mean)}
+        history.append(entry)
+        model.logger.record("eval/mean_reward", float(mean))
+        if mean > best["return"] or "steps" not in best:  # keep it, with the statistics it saw
+            entry["best"] = True
+            best.update(steps=entry["steps"], **{"return": entry["return"]})
+            save_policy(model.policy, algo, env_id, out)
+            save_normalization(venv, out / NORMALIZATION)
+        if progress:
+            print(f"evaluation at {model.num_timesteps:,} steps: return {mean:.3f}", file=sys.stderr)
+
+    class Evaluate(BaseCallback):
         def _on_step(self) -> bool:
-            save_normalization(venv, out / "normalization.json")
-            history[-1]["best"] = True
+            if self.n_calls % max(config["eval_freq"] // n, 1) == 0:
+                evaluate_now()
             return True
 
-    class Progress(BaseCallback):
-        def __init__(self) -> None:
-            super().__init__()
-            self.start = time.perf_counter()
-            self.next = 0.0
-
-        def _on_step(self) -> bool:
-            done = self.num_timesteps / config["steps"]
-            if progress and done >= self.next:
-                rate = self.num_timesteps / max(time.perf_counter() - self.start, 1e-9)
-                print(
-                    f"{100 * done:5.1f} % ({self.num_timesteps:,} steps, {rate:,.0f} steps/s)",
-                    file=sys.stderr,
-                )
-                self.next += 0.05
-            return True
-
-    class Record(EvalCallback):
-        def _on_step(self) -> bool:
-            evaluating = self.eval_freq > 0 and self.n_calls % self.eval_freq == 0
-            if evaluating:
-                history.append({"steps": float(self.num_timesteps)})
-            result = super()._on_step()
-            if evaluating:
-                history[-1]["return"] = float(self.last_mean_reward)
-                if progress:
-                    print(f"evaluation at {self.num_timesteps:,} steps: return {self.last_mean_reward:.3f}",
-                          file=sys.stderr)  # fmt: skip
-            return result
-
-    evaluator = Record(
-        evaluation,
-        callback_on_new_best=SaveNormalization(),
-        n_eval_episodes=config["eval_episodes"],
-        eval_freq=max(config["eval_freq"] // n, 1),
-        best_model_save_path=str(out),
-        deterministic=True,
-        verbose=0,
-    )
+    if note:
+        print(note, file=sys.stderr)
     start = time.perf_counter()
-    model.learn(config["steps"], callback=[evaluator, Progress()])
+    model.learn(steps, callback=[Evaluate(), *([_progress_bar()] if bar else [])])
     seconds = time.perf_counter() - start
-    (out / "best_model.zip").replace(out / "model.zip")
+    if not history or history[-1]["steps"] != model.num_timesteps:
+        evaluate_now()  # the final policy: kept when no evaluation ran or when it is the best
+    final = best["steps"] == model.num_timesteps
     summary = {
         "env": env_id,
-        "algo": config["algo"],
+        "algo": algo,
         "steps": int(model.num_timesteps),
+        "steps_requested": config["steps"],
         "seconds": seconds,
         "steps_per_s": model.num_timesteps / seconds,
-        "best_return": max(h["return"] for h in history),
+        "best_return": best["return"],
+        "kept": {"model": "final" if final else "best", "steps": best["steps"]},
         "evaluations": history,
     }
-    (out / "config.toml").write_text(_toml(config))
-    (out / "training.json").write_text(json.dumps(summary, indent=1) + "\n")
+    write_atomic(out / "config.toml", _toml(config))
+    write_atomic(out / "training.json", json.dumps(summary, indent=1) + "\n")
     return summary
 
 
-def save_normalization(venv: Any, path: Path) -> None:
-    rms = venv.obs_rms
-    data = {
-        "mean": rms.mean.tolist(),
-        "var": rms.var.tolist(),
-        "clip": venv.clip_obs,
-        "epsilon": venv.epsilon,
-    }
-    path.write_text(json.dumps(data) + "\n")
+def _progress_bar() -> Any:
+    """SB3's progress bar (tqdm and rich), drawn on stderr (SB3's own goes to stdout)."""
+    from rich.console import Console
+    from stable_baselines3.common.callbacks import ProgressBarCallback
+    from tqdm import TqdmExperimentalWarning
+    from tqdm.rich import tqdm
+
+    class StderrProgressBar(ProgressBarCallback):
+        def _on_training_start(self) -> None:
+            total = self.locals["total_timesteps"] - self.model.num_timesteps
+            with warnings.catch_warnings():  # tqdm calls its rich bar experimental
+                warnings.simplefilter("ignore", TqdmExperimentalWarning)
+                self.pbar = tqdm(total=total, options={"console": Console(stderr=True)})
+
+    return StderrProgressBar()
+
+
+def load_trained(path: str | Path, algo: str | None = None, allow_pickle: bool = False) -> LoadedPolicy:
+    """A trained policy: a policy directory (``policy.json``, no pickle) or, only with
+    ``allow_pickle=True``, SB3's own ``.zip`` (unpickled: it can execute arbitrary code).
+
+    Parameters
+    ----------
+    path : str or Path
+        The run directory of ``ssme-envs train`` (or a shipped policy), or an SB3 ``.zip``.
+    algo : str, optional
+        The algorithm (ppo, sac, td3): checked against a directory's, needed for a zip.
+    allow_pickle : bool
+        Accept an SB3 zip.
+    """
+    path = Path(path)
+    if path.suffix == ".zip":
+        if algo is None:
+            raise ValueError(f"{path}: name the algorithm of an SB3 zip ({', '.join(ALGOS)})")
+        return load_sb3_zip(path, algo, allow_pickle=allow_pickle)
+    if path.is_file():
+        raise ValueError(f"{path}: a trained policy is a directory ({POLICY_JSON}, {WEIGHTS}, "
+                         f"{NORMALIZATION}) or, with allow_pickle, an SB3 .zip")  # fmt: skip
+    loaded = load_policy(path)
+    if algo is not None and loaded.algo != algo:
+        raise ValueError(f"{path}: holds a {loaded.algo} policy, not {algo}")
+    return loaded
 
 
 class PolicyController(BatchController):
     """A trained SB3 policy as a controller: observations normalized with the run's statistics,
-    deterministic actions. ``path``: a run directory (model.zip, normalization.json, config.toml)."""
+    deterministic actions.
+
+    Parameters
+    ----------
+    source : str, Path or LoadedPolicy
+        A policy directory (see :func:`load_trained`), or a policy already loaded.
+    algo : str, optional
+        The algorithm, checked against the directory's (needed for an SB3 zip).
+    allow_pickle : bool
+        Accept an SB3 ``.zip`` (unpickled on load: it can execute arbitrary code).
+    """
 
     name = "rl"
 
-    def __init__(self, path: str | Path) -> None:
+    def __init__(
+        self, source: str | Path | LoadedPolicy, algo: str | None = None, allow_pickle: bool = False
+    ) -> None:
         super().__init__()
-        path = Path(path)
-        files = [path / "model.zip", path / "normalization.json", path / "config.toml"]
-        missing = [f.name for f in files if not f.exists()]
-        if missing:
-            raise ValueError(f"{path}: not a trained policy (missing {', '.join(missing)})")
-        config = check_config(load_config(path / "config.toml"), str(path / "config.toml"))
-        self.model = _algorithm(config["algo"]).load(path / "model.zip", device="cpu")
-        norm = json.loads((path / "normalization.json").read_text())
-        self.mean, self.scale = np.array(norm["mean"]), 1.0 / np.sqrt(np.array(norm["var"]) + norm["epsilon"])
-        self.clip = float(norm["clip"])
-        self.env_id = config["env"]
-        self.name = config["algo"]
+        loaded = source if isinstance(source, LoadedPolicy) else load_trained(source, algo, allow_pickle)
+        self.policy = loaded.policy
+        self.normalization = loaded.normalization
+        self.size = int(np.prod(loaded.policy.observation_space.shape))
+        self.env_id = loaded.env_id or str(loaded.source)
+        self.name = loaded.algo
 
     def compute(self, obs: np.ndarray) -> np.ndarray:
-        if obs.shape[1] != len(self.mean):
+        if obs.shape[1] != self.size:
             raise ValueError(
-                f"{self.name}: the policy was trained on {self.env_id} ({len(self.mean)} observations), "
+                f"{self.name}: the policy was trained on {self.env_id} ({self.size} observations), "
                 f"got {obs.shape[1]}"
             )
-        normalized = np.clip((obs - self.mean) * self.scale, -self.clip, self.clip).astype(np.float32)
-        action, _ = self.model.predict(normalized, deterministic=True)
+        stats = self.normalization
+        normalized = obs.astype(np.float32) if stats is None else stats.normalize(obs)
+        action, _ = self.policy.predict(normalized, deterministic=True)
         return np.asarray(action, dtype=np.float64)
 
 
@@ -277,4 +371,15 @@ def shipped_policy(env_id: str, trained_on: str = "truth") -> Path:
     return Path(str(resources.files("agents") / "policies" / name))
 
 
-__all__ = ["ALGOS", "SHIPPED", "PolicyController", "check_config", "load_config", "shipped_policy", "train"]
+__all__ = [
+    "ALGOS",
+    "SHIPPED",
+    "PolicyController",
+    "check_config",
+    "load_config",
+    "load_trained",
+    "plan_steps",
+    "shipped_policy",
+    "to_vec_normalize",
+    "train",
+]

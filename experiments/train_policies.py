@@ -1,8 +1,9 @@
 """Train the PPO policies of experiments/configs and ship three of them with the package.
 
 Each config trains on this machine's CPU through the SB3 adapter (VecNormalize, the best
-evaluation kept) into experiments/runs/<config>/; the EngineTracking, EngineThrottle and NozzleTVC
-policies trained on the full truth are copied into agents/policies/<env>/. Every run is then
+evaluation kept) into experiments/runs/<config>/ (policy.json, policy.safetensors,
+normalization.json: no pickle); the EngineTracking, EngineThrottle and NozzleTVC policies trained
+on the full truth are copied into agents/policies/<env>/. Every run is then
 evaluated by the harness beside the LQ servo (or the scheduled one) on the plant it was trained
 for and on the full truth. The policy trained on EngineTracking's identified model is shipped too
 (the sim-to-real comparison). Writes experiments/results/rl_training.md.
@@ -75,7 +76,8 @@ def main(names: list[str], evaluate_only: bool = False) -> None:
         if name in SHIP and not evaluate_only:
             target = HERE.parent / "agents" / "policies" / SHIP[name]
             target.mkdir(parents=True, exist_ok=True)
-            for file in ("model.zip", "normalization.json", "config.toml", "training.json"):
+            for file in ("policy.json", "policy.safetensors", "normalization.json", "config.toml",
+                         "training.json"):  # fmt: skip
                 shutil.copy(out / file, target / file)
         baselines = BASELINES[env_id]
         for scenario in dict.fromkeys([*PLANT[name], TRUTH[env_id]]):

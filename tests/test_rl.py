@@ -1,17 +1,21 @@
-"""RL: config checks, smoke training of each algorithm, the shipped policies."""
+"""RL: config checks, smoke training of each algorithm, the train + evaluate path, the shipped
+policies."""
 
 import json
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from agents import parse_controller
-from agents.sb3 import SHIPPED, PolicyController, check_config, shipped_policy
+from agents.sb3 import SHIPPED, PolicyController, check_config, load_config, plan_steps, shipped_policy
 from ssme_envs.cli import main
 from ssme_envs.evaluation import evaluate
 
 TRACKING = "ssme_envs/EngineTracking-v0"
+NOZZLE = "ssme_envs/NozzleTVC-v0"
+RUN_FILES = ["config.toml", "normalization.json", "policy.json", "policy.safetensors", "training.json"]
 
 
 @pytest.mark.parametrize(
@@ -73,7 +77,10 @@ def test_each_algorithm_trains_saves_and_acts(algo, tmp_path):
     out = tmp_path / algo
     assert main(["train", "--config", str(config), "--steps", "2048", "--seed", "1", "--out", str(out)]) == 0
     summary = json.loads((out / "training.json").read_text())
-    assert summary["steps"] >= 2048 and summary["evaluations"]
+    assert summary["steps"] == 2048 and [e["steps"] for e in summary["evaluations"]] == [1024, 2048]
+    assert sorted(p.name for p in out.iterdir()) == RUN_FILES  # no zip, nothing pickled
+    best = max(summary["evaluations"], key=lambda e: e["return"])
+    assert summary["kept"] == {"model": "final" if best["steps"] == 2048 else "best", "steps": best["steps"]}
     policy = PolicyController(out)
     results = evaluate(TRACKING, {algo: lambda env: PolicyController(out)}, ["nominal"], episodes=2)
     assert np.isfinite(results["nominal"][algo]["cost_mean"])
@@ -86,7 +93,8 @@ def test_each_algorithm_trains_saves_and_acts(algo, tmp_path):
 def test_shipped_policies_load_and_beat_the_zero_action(name):
     env_id = "ssme_envs/" + name.removesuffix("-identified")
     trained_on = "identified" if name.endswith("-identified") else "truth"
-    assert (shipped_policy(env_id, trained_on) / "model.zip").exists()
+    files = sorted(p.name for p in shipped_policy(env_id, trained_on).iterdir())
+    assert files == RUN_FILES
     scenario = {"EngineThrottle-v0": "mission", "NozzleTVC-v0": "random_steps"}.get(name, "noise")
     factories = {
         "zero": parse_controller("zero", env_id),
@@ -94,3 +102,73 @@ def test_shipped_policies_load_and_beat_the_zero_action(name):
     }
     results = evaluate(env_id, factories, [scenario], episodes=5)[scenario]
     assert results["ppo"]["cost_mean"] < 0.5 * results["zero"]["cost_mean"]
+
+
+@pytest.mark.parametrize(
+    ("config", "steps", "hyper", "note"),
+    [
+        ({"algo": "ppo", "steps": 20_000}, 20_032, {"n_steps": 313}, "n_steps 313 fitted"),
+        ({"algo": "ppo", "steps": 5000, "num_envs": 4}, 5056, {"n_steps": 1264}, "5,056 steps for the 5,000"),
+        ({"algo": "ppo", "steps": 5000, "hyperparameters": {"n_steps": 64}}, 8192, {"n_steps": 64},
+         "whole rollouts of n_steps 64 x 64 envs: 8,192 steps for the 5,000 asked"),
+        ({"algo": "ppo", "steps": 8192, "hyperparameters": {"n_steps": 64}}, 8192, {"n_steps": 64}, None),
+        ({"algo": "sac", "steps": 5000}, 5056, {}, "train_freq 1 x 64 envs: 5,056 steps for the 5,000"),
+        ({"algo": "td3", "steps": 100, "num_envs": 4, "hyperparameters": {"train_freq": 8}}, 128,
+         {"train_freq": 8}, "128 steps"),
+    ],
+)  # fmt: skip
+def test_steps_round_to_whole_rollouts_and_say_so(config, steps, hyper, note):
+    planned, hyperparameters, said = plan_steps(check_config({"env": NOZZLE, **config}))
+    assert (planned, hyperparameters) == (steps, hyper)
+    assert said is None if note is None else note in said
+
+
+def test_train_shorter_than_the_evaluation_interval_keeps_the_final_policy_and_evaluate_scores_it(
+    tmp_path, capsys
+):
+    config = tmp_path / "tiny.toml"
+    config.write_text(
+        f'env = "{NOZZLE}"\nalgo = "ppo"\nnum_envs = 4\neval_episodes = 2\n'
+        "[env_options]\nepisode_seconds = 0.4\n[policy]\nnet_arch = [16, 16]\n"
+    )
+    out = tmp_path / "run"
+    args = ["train", "--config", str(config), "--steps", "300", "--tensorboard", "--out", str(out)]
+    assert main(args) == 0  # 300 steps, far below the 50,000-step evaluation interval
+    captured = capsys.readouterr()
+    assert "ppo trains in whole rollouts of n_steps 80 x 4 envs: 320 steps for the 300 asked" in captured.err
+    assert "kept the final policy (320 steps" in captured.out and "100%" in captured.err
+    summary = json.loads((out / "training.json").read_text())
+    assert summary["steps"] == 320 and summary["kept"] == {"model": "final", "steps": 320}
+    assert load_config(out / "config.toml")["hyperparameters"] == {"n_steps": 80}
+    assert sorted(p.name for p in out.iterdir()) == sorted([*RUN_FILES, "tensorboard"])
+    assert any(p.name.startswith("events.out.tfevents") for p in (out / "tensorboard").rglob("*"))
+    report = tmp_path / "eval"
+    args = ["evaluate", "--env", NOZZLE, "--controllers", f"lqi,ppo:{out}", "--scenario", "step",
+            "--episodes", "2", "--out", str(report)]  # fmt: skip
+    assert main(args) == 0
+    scored = json.loads((report / "results.json").read_text())["scenarios"]["step"]
+    assert sorted(scored) == sorted(["lqi", f"ppo:{out}"]) and np.isfinite(scored[f"ppo:{out}"]["cost_mean"])
+    assert main([*args[:4], f"sac:{out}", *args[5:]]) == 2
+    assert capsys.readouterr().err.strip().endswith(f"{out}: holds a ppo policy, not sac")
+
+
+def test_the_rl_extra_installs_what_training_uses():
+    pyproject = load_config(Path(__file__).parents[1] / "pyproject.toml")
+    extras = pyproject["project"]["optional-dependencies"]
+    for extra, needed in (("rl", {"safetensors", "tqdm", "rich", "tensorboard"}), ("test", {"safetensors"})):
+        names = {req.split(">")[0].split("=")[0].split(";")[0].strip() for req in extras[extra]}
+        assert needed <= names, f"{extra} lacks {needed - names}"
+        assert "torch==2.13.0" in extras[extra]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("algo", ["ppo", "sac", "td3"])
+def test_the_documented_5000_step_runs_train_and_score(algo, tmp_path):
+    out = tmp_path / algo
+    assert main(["train", "--env", NOZZLE, "--algo", algo, "--steps", "5000", "--out", str(out)]) == 0
+    assert json.loads((out / "training.json").read_text())["steps"] == 5056  # 79 x 64 envs
+    args = ["evaluate", "--env", NOZZLE, "--controllers", f"lqi,{algo}:{out}", "--episodes", "2",
+            "--out", str(tmp_path / "eval")]  # fmt: skip
+    assert main(args) == 0
+    scored = json.loads((tmp_path / "eval" / "results.json").read_text())["scenarios"]
+    assert all(np.isfinite(scored[scenario][f"{algo}:{out}"]["cost_mean"]) for scenario in scored)

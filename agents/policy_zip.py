@@ -1,0 +1,92 @@
+"""SB3's own ``.zip`` policies: loaded only on request (they unpickle), and converted once to
+the pickle-free format of :mod:`agents.policy_files`.
+
+Convert old run directories (``model.zip`` beside ``normalization.json`` and ``config.toml``)::
+
+    python -m agents.policy_zip RUN_DIR [RUN_DIR ...] --allow-pickle
+
+Each conversion checks that the deterministic actions of the new files and of the zip agree bit
+for bit on random observations; the zip is left for you to delete.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from agents.policy_files import (
+    NORMALIZATION,
+    PICKLE_WARNING,
+    POLICY_JSON,
+    WEIGHTS,
+    LoadedPolicy,
+    algorithm_class,
+    load_policy,
+    read_normalization,
+    save_policy,
+)
+
+
+def load_sb3_zip(path: Path, algo: str, *, allow_pickle: bool = False) -> LoadedPolicy:
+    """A policy from SB3's own ``.zip`` (with ``normalization.json`` beside it if there is one).
+    SB3 unpickles parts of the zip, which can execute arbitrary code: refused (ValueError) unless
+    ``allow_pickle=True``, and a warning is printed when allowed."""
+    path = Path(path)
+    if not allow_pickle:
+        raise ValueError(
+            f"{path}: refusing to load an SB3 zip: {PICKLE_WARNING}; pass allow_pickle=True "
+            "(ssme-envs evaluate --allow-pickle) to load it anyway"
+        )
+    if not path.is_file():
+        raise ValueError(f"{path}: no such file")
+    print(f"warning: {path}: {PICKLE_WARNING}", file=sys.stderr)
+    model = algorithm_class(algo).load(path, device="cpu")
+    beside = path.parent / NORMALIZATION
+    normalization = read_normalization(beside) if beside.is_file() else None
+    if normalization is None:
+        print(f"warning: no {NORMALIZATION} beside {path}: observations go to the policy unnormalized",
+              file=sys.stderr)  # fmt: skip
+    return LoadedPolicy(model.policy, algo, None, normalization, path)
+
+
+def convert_run(directory: Path, env_id: str, algo: str, *, allow_pickle: bool = False,
+                observations: int = 500, seed: int = 0) -> int:  # fmt: skip
+    """Convert a run directory's SB3 ``model.zip`` to ``policy.json`` + ``policy.safetensors``
+    and check that deterministic actions agree bit for bit on ``observations`` random ones
+    (drawn from the normalization statistics). Unpickles the zip: needs ``allow_pickle=True``.
+    The zip is left in place. Returns the number of observations compared."""
+    directory = Path(directory)
+    old = load_sb3_zip(directory / "model.zip", algo, allow_pickle=allow_pickle)
+    save_policy(old.policy, algo, env_id, directory)
+    new = load_policy(directory)
+    stats = new.normalization
+    rng = np.random.default_rng(seed)
+    obs = stats.mean + np.sqrt(stats.var) * rng.standard_normal((observations, len(stats.mean))) * 2.0
+    normalized = stats.normalize(obs)
+    before, _ = old.policy.predict(normalized, deterministic=True)
+    after, _ = new.policy.predict(normalized, deterministic=True)
+    if before.shape != after.shape or before.tobytes() != after.tobytes():
+        raise ValueError(f"{directory}: converted policy acts differently from model.zip")
+    return observations
+
+
+def _main(argv: list[str]) -> int:
+    """``python -m agents.policy_zip RUN_DIR ... --allow-pickle``: convert old run directories."""
+    from agents.sb3 import check_config, load_config
+
+    dirs = [Path(a) for a in argv if a != "--allow-pickle"]
+    if "--allow-pickle" not in argv or not dirs:
+        print(f"usage: python -m agents.policy_zip RUN_DIR [...] --allow-pickle ({PICKLE_WARNING})",
+              file=sys.stderr)  # fmt: skip
+        return 2
+    for directory in dirs:
+        config = check_config(load_config(directory / "config.toml"), str(directory / "config.toml"))
+        count = convert_run(directory, config["env"], config["algo"], allow_pickle=True)
+        print(f"{directory}: wrote {POLICY_JSON} and {WEIGHTS}; actions bit-equal on {count} observations")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(_main(sys.argv[1:]))
