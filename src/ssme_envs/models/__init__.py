@@ -9,6 +9,7 @@ from ssme_envs.models.engine import (
     published_model,
     simulate,
 )
+from ssme_envs.models.engine_nonlinear import NonlinearEngine, flow_characteristic, simulate_nonlinear
 from ssme_envs.models.statespace import AlphaCanonicalModel, AlphaStructure, asymmetric_gain
 
 __all__ = [
@@ -17,9 +18,12 @@ __all__ = [
     "AlphaCanonicalModel",
     "AlphaStructure",
     "EngineCore",
+    "NonlinearEngine",
     "TruthConfig",
     "asymmetric_gain",
+    "flow_characteristic",
     "identified_model",
     "published_model",
     "simulate",
+    "simulate_nonlinear",
 ]
