@@ -8,8 +8,9 @@ the same sensor noise:
 * **bench**: the bench as ``bench_experiment`` simulates it (noise at 2.5 kHz, anti-alias FIR
   filter, decimation by 20);
 * **bench, bias-corrected**: the bench's estimates minus the acquisition chain's bias at the
-  estimate (``acquisition_bias``, what ``identify_nozzle(bench_acquisition=True)`` does; the
-  standard errors are the bench's);
+  estimate (``acquisition_bias`` over ``BIAS_DRAWS`` simulated noisy acquisitions, what
+  ``identify_nozzle(bench_noise=...)`` does; standard errors the bench's times
+  sqrt(1 + 1/BIAS_DRAWS));
 * **ideal sampler**: the same decimated noise added to the exact samples of the angle at
   Ts = 0.008 s (no anti-alias filter acting on the motion), which the second-order ZOH model
   describes exactly.
@@ -40,6 +41,7 @@ import numpy as np  # noqa: E402
 
 from ssme_envs.identification.bouc_wen import NORMALIZED_NAMES, fit_bouc_wen  # noqa: E402
 from ssme_envs.identification.nozzle_pipeline import (  # noqa: E402
+    BIAS_DRAWS,
     DECIMATION,
     SENSOR_NOISE,
     acquire,
@@ -90,9 +92,10 @@ def linear_seed(job: tuple[int, int, tuple[str, ...]]) -> dict[str, np.ndarray]:
             )
             out[f"{name} innovations"] = other.standard_errors
         if acquisition == "bench":
-            bias = acquisition_bias(tau, tuple(params[p] for p in PARAMETERS))
+            jbk = tuple(params[p] for p in PARAMETERS)
+            bias = acquisition_bias(tau, jbk, SENSOR_NOISE, BIAS_DRAWS, seed)
             corrected = [params[p] - bias[p] for p in PARAMETERS]
-            out[CORRECTED] = np.array([corrected, boot.standard_errors])
+            out[CORRECTED] = np.array([corrected, boot.standard_errors * np.sqrt(1 + 1 / BIAS_DRAWS)])
             out[f"{CORRECTED} seconds"] = out["bench seconds"]
             if "bench innovations" in out:
                 out[f"{CORRECTED} innovations"] = out["bench innovations"]
@@ -159,7 +162,8 @@ def linear_section(seeds: int, replicates: int, workers: int, acquisitions: tupl
         secs = np.array([float(r[f"{acquisition} seconds"]) for r in runs])
         what = {
             "bench": "as `bench_experiment` makes it: anti-alias FIR filter and decimation by 20",
-            CORRECTED: "the bench's estimates minus the acquisition bias simulated at each estimate",
+            CORRECTED: "the bench's estimates minus the acquisition bias simulated at each estimate "
+            f"({BIAS_DRAWS} noisy acquisitions)",
             "ideal sampler": "the exact samples of the angle plus the same decimated sensor noise",
         }[acquisition]
         lines += [

@@ -369,7 +369,9 @@ def test_undetermined_standard_errors_are_written_as_null():
 
 def test_version_1_model_without_uncertainty_still_loads(tmp_path):
     doc = identified_nozzle().to_dict()
-    doc["schema_version"] = 1
+    doc["schema_version"] = 1  # a version-1 file: no uncertainty blocks
+    doc["linear"].pop("uncertainty")
+    doc["bouc_wen"].pop("uncertainty")
     path = tmp_path / "m.json"
     path.write_text(json.dumps(doc))
     model = NozzleModel.load(path)

@@ -145,6 +145,15 @@ def test_recommended_substeps_grow_with_stiff_hysteresis():
     )
 
 
+def test_recommended_substeps_refuse_an_overflowing_rate_and_tolerate_a_vanishing_one():
+    p = published_nozzle("bouc_wen").to_dict()
+    with pytest.raises(ValueError, match="overflows"):  # w_max = 1e10^(-100) underflows to 0
+        recommended_substeps(NozzleParameters(**{**p, "beta": 1e10, "gamma": 0.0, "n": 0.01}), 0.008, 0.1)
+    tiny = NozzleParameters(**{**p, "A": 1.0, "beta": 1e-300, "gamma": 0.0, "n": 0.01})  # w_max overflows
+    omega = np.sqrt(tiny.small_signal_stiffness / tiny.J)  # the hysteresis rate vanishes
+    assert recommended_substeps(tiny, 0.008, 0.1) == np.ceil(0.008 * omega / 0.2)
+
+
 @pytest.mark.parametrize(
     ("kwargs", "message"),
     [
@@ -152,6 +161,11 @@ def test_recommended_substeps_grow_with_stiff_hysteresis():
         ({"a": 1.5}, "a must be in"),
         ({"b": float("nan")}, "finite"),
         ({"beta": -3.0}, "beta \\+ gamma"),
+        ({"gamma": -0.5}, "gamma must be >= 0"),
+        ({"k": -1.0e5}, "k must be positive"),
+        ({"b": -1.0}, "damping b must be >= 0"),
+        ({"J": True}, "J must be a finite number"),
+        ({"A": 1e3, "n": 200.0}, "not finite"),
     ],
 )
 def test_bad_parameters(kwargs, message):
@@ -178,6 +192,8 @@ def test_packaged_identified_model_loads_and_round_trips(tmp_path):
         (lambda d: d["bouc_wen"].update(n=-1.0), "n must be positive"),
         (lambda d: d.update(schema="x"), "schema"),
         (lambda d: d["linear"].update(J="heavy"), "linear.J"),
+        (lambda d: d["linear"].update(b=-1.0), "linear.b must be >= 0"),
+        (lambda d: d["bouc_wen"].update(gamma=-0.1), "gamma must be >= 0"),
     ],
 )
 def test_malformed_nozzle_model(tmp_path, mutate, message):

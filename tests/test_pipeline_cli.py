@@ -234,3 +234,25 @@ def test_cli_validate_scores_a_model_and_rejects_malformed_json(tmp_path, capsys
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert err.startswith("error: ") and "B has shape (3, 2)" in err and err.count("\n") == 1
+
+
+def test_a_rerun_replaces_the_earlier_run_whole(tmp_path, capsys):
+    """Two validations into one --out: the second's files only, no figure left from the first."""
+    model_path = tmp_path / "model.json"
+    identified_model(110).save(model_path)
+    records = default_experiment(110)
+    for name, key in (("lowfreq", "validation_low_frequency"), ("prbs", "validation_prbs")):
+        write_record(tmp_path / f"{name}.csv", records[key])
+    out = tmp_path / "v"
+    argv = ["validate", "engine", "--model", str(model_path), "--out", str(out), "--data"]
+    assert main([*argv, str(tmp_path / "lowfreq.csv"), str(tmp_path / "prbs.csv")]) == 0
+    assert {"lowfreq.png", "prbs.png"} <= {p.name for p in out.iterdir()}
+    assert main([*argv, str(tmp_path / "prbs.csv")]) == 0
+    assert "replaced the earlier run in" in capsys.readouterr().err
+    assert sorted(p.name for p in out.iterdir()) == [
+        ".ssme-envs-run",
+        "prbs.png",
+        "report.md",
+        "response_bands.png",
+    ]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["lowfreq.csv", "model.json", "prbs.csv", "v"]

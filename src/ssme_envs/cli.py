@@ -7,54 +7,89 @@ controller on every env, write one report.md. ``ssme-envs evaluate --env ID --co
 Bouc-Wen). ``ssme-envs identify engine [--data FILE.csv] --out DIR`` identifies an alpha-canonical engine
 model from a record, or, without ``--data``, runs the embedded experiment on the truth at the
 five Table I power levels. ``ssme-envs validate engine --model model.json --data FILE.csv
-[--data FILE.csv ...] --out DIR`` scores a model on records. Errors in what the user gave print one
-line ``error: ...`` and exit with code 2.
+[--data FILE.csv ...] --out DIR`` scores a model on records. Errors in what the user gave (and a
+full disk, a locked or unusable --out, ...) print one line ``error: ...`` and exit with code 2;
+Ctrl-C exits with code 130. A run writes into a fresh directory beside --out that replaces --out
+only once the run has succeeded (see :mod:`ssme_envs.outputs`).
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib.util
-import math
 import sys
+import textwrap
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
+
+from ssme_envs.cli_checks import (
+    check_episodes,
+    check_seed,
+    check_vector_sizes,
+    error_line,
+    one_line,
+    sigint_in_main_process,
+)
+from ssme_envs.cli_identify import identify_engine as _identify_engine
+from ssme_envs.cli_identify import identify_nozzle as _identify_nozzle
+from ssme_envs.cli_identify import names as _names
+from ssme_envs.cli_identify import output_directory as _output_directory
+from ssme_envs.cli_identify import validate_engine as _validate_engine
+from ssme_envs.outputs import run_directory, write_text
+
+OUTPUT_NOTE = (
+    "--out is built in a fresh directory beside it and swapped in when the run succeeds: an earlier "
+    "ssme-envs run there is replaced, a failed or interrupted run leaves it as it was, a directory "
+    "holding other files is refused, and a second run into the same --out at the same time is "
+    "refused (lock file .NAME.lock beside it)."
+)
 
 
 class _UsageError(Exception):
-    pass
+    def __init__(self, message: str, usage: str = "") -> None:
+        super().__init__(message)
+        self.usage = usage  # printed before the error line (a command given without a subcommand)
 
 
 class _Parser(argparse.ArgumentParser):
-    def error(self, message: str) -> None:  # one line, no usage dump
+    def __init__(self, *args, epilog_factory: Callable[[], str] | None = None, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self.epilog_factory = epilog_factory  # help text built only when --help asks for it
+
+    def format_help(self) -> str:
+        if self.epilog_factory is not None:
+            self.epilog = self.epilog_factory()
+        return super().format_help()
+
+    def error(self, message: str) -> None:  # one line; the help when a subcommand is missing
+        subcommands = self._subparsers._group_actions if self._subparsers is not None else []
+        missing = [a for a in subcommands if a.required and a.dest in message.rpartition(":")[2].split()]
+        if message.startswith("the following arguments are required") and missing:
+            choices = ", ".join(missing[0].choices)
+            raise _UsageError(f"{self.prog}: choose one of {choices}", usage=self.format_help())
         raise _UsageError(message)
 
 
-def _names(text: str, option: str) -> tuple[str, ...]:
-    names = tuple(n.strip() for n in text.split(","))
-    if not all(names):
-        raise _UsageError(f"{option} must be a comma-separated list of names, got {text!r}")
-    return names
-
-
-def _indices(text: str) -> tuple[int, ...]:
-    try:
-        values = tuple(int(v) for v in text.split(","))
-    except ValueError:
-        raise _UsageError(f"--indices must be comma-separated positive integers, got {text!r}") from None
-    if any(v < 1 for v in values):
-        raise _UsageError(f"--indices must be positive integers, got {text!r}")
-    return values
-
-
 def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog="ssme-envs", description=__doc__.splitlines()[0])
+    parser = _Parser(
+        prog="ssme-envs",
+        description="Identified SSME engine and movable-nozzle models, Gymnasium environments on them and "
+        "controllers: identify, validate, evaluate, train, benchmark, and the main report. "
+        "'ssme-envs COMMAND --help' describes a command.",
+        epilog=OUTPUT_NOTE + " Errors print one line 'error: ...' and exit with code 2; Ctrl-C exits 130.",
+    )
     from ssme_envs import __version__
 
     parser.add_argument("--version", action="version", version=f"ssme-envs {__version__}")
     commands = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
-    identify = commands.add_parser("identify", help="identify a plant model from input/output records")
+    identify = commands.add_parser(
+        "identify",
+        help="identify a plant model from input/output records",
+        description="Identify a plant model (engine or nozzle) from a CSV record, or from the embedded "
+        "experiment on the truth; write model.json, report.md and figures under --out.",
+        epilog=OUTPUT_NOTE,
+    )
     plants = identify.add_subparsers(dest="plant", required=True, parser_class=_Parser)
 
     engine = plants.add_parser(
@@ -62,6 +97,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="SSME valves -> Pc, MR in alpha-canonical form",
         description="Identify an alpha-canonical engine model (NASA TM-104422). Without --data, run "
         "the embedded PRBS experiment on the truth at 70-110 %% power and compare with Tables I and II.",
+        epilog=OUTPUT_NOTE,
     )
     engine.add_argument(
         "--data", type=Path, help="CSV record with a header row (default: embedded experiment)"
@@ -91,6 +127,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="movable nozzle torque -> angle: DSR_e linear model and Bouc-Wen joint",
         description="Identify the movable nozzle (VLS paper): a 2nd-order DSR_e model with J, b, k and a "
         "Bouc-Wen hysteretic joint. Without --data, run the embedded bench test on Table 1's nozzle.",
+        epilog=OUTPUT_NOTE,
     )
     nozzle.add_argument(
         "--data", type=Path, help="CSV record with a header row (default: embedded bench test)"
@@ -110,7 +147,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
 
     bench = commands.add_parser(
-        "bench", help="environment steps per second beside Pendulum-v1 and CartPole-v1 (ratios)"
+        "bench",
+        help="environment steps per second beside Pendulum-v1 and CartPole-v1 (ratios)",
+        description="Measure each env's steps per second, single and through its native vector env at "
+        "several sizes, in alternating rounds beside Pendulum-v1 and CartPole-v1; print a markdown table "
+        "(--out FILE: also write it, atomically). Sizes are checked against the free memory first.",
     )
     bench.add_argument(
         "--rounds",
@@ -123,11 +164,27 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--out", type=Path, help="also write the table to this markdown file")
 
     evaluate = commands.add_parser(
-        "evaluate", help="score controllers on an env's scenarios (results.json, results.md, plots)"
+        "evaluate",
+        help="score controllers on an env's scenarios (results.json, results.md, plots)",
+        description=textwrap.fill(
+            "Run each controller on each scenario of an env for --episodes seeded episodes and write "
+            "results.json, results.md and one PNG per scenario under --out. --episodes is checked "
+            "against the free memory first. " + OUTPUT_NOTE
+        ),
+        epilog_factory=_evaluate_choices,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     evaluate.add_argument("--env", required=True, help="env id, e.g. ssme_envs/EngineTracking-v0")
     evaluate.add_argument(
-        "--controllers", help="comma-separated, e.g. pi,lqi,lqi:truth (default: every one for the env)"
+        "--controllers",
+        help="comma-separated, e.g. pi,lqi,lqi:truth,ppo; ppo:RUN_DIR, sac:RUN_DIR or td3:RUN_DIR for "
+        "a run of 'ssme-envs train' (default: every one for the env)",
+    )
+    evaluate.add_argument(
+        "--allow-pickle",
+        action="store_true",
+        help="also accept ALGO:FILE.zip, a stable-baselines3 zip: loading it unpickles it, which can "
+        "execute arbitrary code (use only for files you trust)",
     )
     evaluate.add_argument("--scenario", help="comma-separated scenario names (default: all of the env's)")
     evaluate.add_argument(
@@ -139,11 +196,18 @@ def build_parser() -> argparse.ArgumentParser:
     evaluate.add_argument("--out", type=Path, required=True, help="output directory")
 
     train = commands.add_parser(
-        "train", help="train a stable-baselines3 agent on an env (model.zip, normalization, config)"
+        "train",
+        help="train a stable-baselines3 agent on an env (policy.json, policy.safetensors, normalization, "
+        "config; no pickle)",
     )
     train.add_argument("--env", help="env id (or 'env' in the config)")
     train.add_argument("--algo", help="ppo, sac or td3 (or 'algo' in the config)")
-    train.add_argument("--steps", type=int, help="environment steps (default: the config's, else 200000)")
+    train.add_argument(
+        "--steps",
+        type=int,
+        help="environment steps, rounded up to whole rollouts (a line says so) (default: the config's, "
+        "else 200000)",
+    )
     train.add_argument("--seed", type=int, help="seed (default: the config's, else 0)")
     train.add_argument("--config", type=Path, help="TOML config (hyperparameters, env options, ...)")
     train.add_argument("--tensorboard", action="store_true", help="write TensorBoard logs under --out")
@@ -152,16 +216,32 @@ def build_parser() -> argparse.ArgumentParser:
     report = commands.add_parser(
         "report",
         help="the main job: identify the engine and the nozzle, evaluate every controller on every env",
+        description="The main job: identify the engine and the nozzle on their embedded experiments, "
+        "evaluate the controllers of each env on its scenarios, and write one report.md (with the "
+        "sub-reports in engine/, nozzle/ and one folder per env) under --out. --episodes is checked "
+        "against the free memory first.",
+        epilog=OUTPUT_NOTE,
     )
     report.add_argument("--out", type=Path, required=True, help="output directory")
     report.add_argument(
         "--episodes", type=int, default=20, help="episodes per scenario (default: %(default)s)"
     )
 
-    check = commands.add_parser("validate", help="validate a model.json on input/output records")
+    check = commands.add_parser(
+        "validate",
+        help="validate a model.json on input/output records",
+        description="Score an identified model.json on CSV records: SEE and fit tables and plots of "
+        "measured vs filter vs model, in report.md under --out.",
+        epilog=OUTPUT_NOTE,
+    )
     check_plants = check.add_subparsers(dest="plant", required=True, parser_class=_Parser)
     check_engine = check_plants.add_parser(
-        "engine", help="SEE, fit and plots of an engine model.json on CSV records"
+        "engine",
+        help="SEE, fit and plots of an engine model.json on CSV records",
+        description="Score an engine model.json (schema ssme-envs/engine-model) on one or more CSV "
+        "records with its input and output columns; every record is read and checked before any "
+        "output is written.",
+        epilog=OUTPUT_NOTE,
     )
     check_engine.add_argument("--model", type=Path, required=True, help="engine model.json")
     check_engine.add_argument(
@@ -174,171 +254,25 @@ def build_parser() -> argparse.ArgumentParser:
     )
     check_engine.add_argument("--out", type=Path, required=True, help="output directory")
     check_engine.add_argument("--dt", type=float, help="sample time in s, if the CSV has no 't' column")
+    for action in commands._choices_actions:  # a command without a description shows its help line
+        sub = commands.choices[action.dest]
+        sub.description = sub.description or action.help
     return parser
 
 
-def _needs_data(args: argparse.Namespace, flags: tuple[str, ...], embedded: str) -> None:
-    for flag in flags:
-        if getattr(args, flag) is not None:
-            raise _UsageError(f"--{flag} needs --data (the embedded {embedded} sets its own)")
+def _evaluate_choices() -> str:
+    """The envs, their scenarios and controllers, from where they are defined (evaluate --help)."""
+    from agents import controller_names
+    from ssme_envs.evaluation import SCENARIOS
 
-
-def _check_same_dt(path: Path, dt: float, reference: float, what: str) -> None:
-    if abs(dt - reference) > 1e-9 * reference:
-        raise ValueError(f"{path}: sample time {dt:g} s differs from the {what}'s {reference:g} s")
-
-
-def _check_record(path: Path, record) -> None:
-    """Refuse a record on which SEE or fit cannot be computed (zero, constant, huge, NaN)."""
-    from ssme_envs.identification.records import check_validation_record
-
-    check_validation_record(record.u, record.y, record.input_names, record.output_names, path)
-
-
-def _check_scores(path: Path, scores: dict, output_names: Sequence[str]) -> None:
-    """Refuse SEE or fit values that came out NaN or inf (the model's prediction overflowed)."""
-    for predictor, figures in scores.items():
-        for metric, values in figures.items():
-            for name, value in zip(output_names, values, strict=True):
-                if not math.isfinite(value):
-                    raise ValueError(
-                        f"{path}: the {predictor}'s {metric} for output '{name}' is {value} "
-                        "(its prediction overflows on this record)"
-                    )
-
-
-def _identify_engine(args: argparse.Namespace) -> int:
-    import numpy as np
-
-    from ssme_envs.identification import pipeline, report
-    from ssme_envs.identification.metrics import validate
-    from ssme_envs.models.engine import TruthConfig
-
-    out: Path = args.out
-    _make_dir(out)
-    options = {
-        "method": args.method,
-        "asymmetric": not args.symmetric,
-        "max_index": args.max_index,
-        "rank_tol": args.rank_tol,
-    }
-    if args.indices:
-        options["indices"] = _indices(args.indices)
-
-    if args.data is None:
-        _needs_data(args, ("validate", "dt", "indices"), "experiment")
-        seed = pipeline.DEFAULT_SEED if args.seed is None else args.seed
-        config = TruthConfig()
-        start = time.perf_counter()
-        results = pipeline.run_default(seed=seed, config=config, options=options)
-        (out / "data").mkdir(exist_ok=True)
-        for r in results:
-            r.identified.model.save(out / f"model_{r.power_percent}.json")
-            for name, rec in r.records.items():
-                pipeline.write_record(out / "data" / f"engine_{r.power_percent}_{name}.csv", rec)
-            see = r.validation["validation_low_frequency"]["model"]["see"]
-            if r.identified.search is not None and r.identified.search.close:
-                print(f"{r.power_percent:>3d} % power: {r.identified.search.summary()}")
-            print(
-                f"{r.power_percent:>3d} % power: indices {list(r.identified.model.observability_indices)}, "
-                f"lambda {[round(float(v), 4) for v in r.identified.model.lam]}, model SEE on the "
-                f"low-frequency test {[round(v, 4) for v in see]}"
-            )
-        note = (
-            f"valve backlash {config.backlash:g}, valve stiction {config.stiction:g} and sensor noise "
-            f"(std {list(config.sensor_noise)}) in front of and behind it (normalized units; our assumptions)"
-        )
-        path = report.write_default_report(out, results, seed, note)
-        print(
-            f"identified {len(results)} power levels in {time.perf_counter() - start:.2f} s; report: {path}"
-        )
-        return 0
-
-    if args.seed is not None:
-        raise _UsageError("--seed applies to the embedded experiment only (no --data)")
-    inputs, outputs = _names(args.inputs, "--inputs"), _names(args.outputs, "--outputs")
-    record = pipeline.read_record(args.data, inputs, outputs, args.dt)
-    _check_record(args.data, record)
-    check = None
-    if args.validate is not None:  # refuse a bad validation record before the identification runs
-        check = pipeline.read_record(args.validate, inputs, outputs, args.dt)
-        _check_same_dt(args.validate, check.dt, record.dt, "data")
-        _check_record(args.validate, check)
-    ident = pipeline.identify_record(record, **options)
-    records = {"identification": record}
-    validation = {"identification": ident.model.fit["identification_record"]}
-    if check is not None:
-        records["validation"] = check
-        with np.errstate(all="ignore"):  # an overflow is refused just below, without warnings
-            validation["validation"] = validate(ident.model, check.u, check.y)
-        _check_scores(args.validate, validation["validation"], outputs)
-        ident.model.fit["validation_record"] = validation["validation"]
-    ident.model.fit["data"] = str(args.data)
-    ident.model.save(out / "model.json")
-    path = report.write_record_report(out, ident.model, records, validation, ident, args.rank_tol)
-    model = ident.model
-    if ident.search is not None:
-        print(ident.search.summary())
-    print(
-        f"indices {list(model.observability_indices)}, lambda {[round(float(v), 4) for v in model.lam]}, "
-        f"model SEE {[round(v, 4) for v in validation['identification']['model']['see']]}"
-    )
-    print(f"wrote {out / 'model.json'} and {path}")
-    return 0
-
-
-def _identify_nozzle(args: argparse.Namespace) -> int:
-    from ssme_envs.identification import nozzle_pipeline as npipe
-    from ssme_envs.identification.nozzle_report import write_nozzle_report
-    from ssme_envs.models.nozzle import BENCH_RATE_HZ, NOZZLE_DT, published_nozzle
-
-    if args.workers < 1:
-        raise _UsageError(f"--workers must be at least 1, got {args.workers}")
-    if not args.normalization_a > 0:
-        raise _UsageError(f"--normalization-a must be positive, got {args.normalization_a}")
-    seed = npipe.DEFAULT_SEED if args.seed is None else args.seed
-    truth = None
-    start = time.perf_counter()
-    if args.data is None:
-        _needs_data(args, ("validate", "dt"), "bench test")
-        truth = published_nozzle("bouc_wen")
-        bench = (
-            f"{BENCH_RATE_HZ / 1000:g} kHz acquisition with sensor noise (std {npipe.SENSOR_NOISE:g} rad), "
-            f"decimated to {NOZZLE_DT:g} s "
-            f"(N = {npipe.BENCH_SAMPLES}, {npipe.BENCH_SAMPLES * NOZZLE_DT:.1f} s)"
-        )
-        print(f"simulating the bench test ({bench}) and identifying ...")
-        _make_dir(args.out)
-        ident, records = npipe.run_default(seed, args.workers, args.normalization_a)
-        note = (
-            "Bench data simulated from the paper's Table 1 Bouc-Wen nozzle (the truth of this report): "
-            f"a PRBS torque keeping the angle within +-{npipe.RANGE_DEG:g} deg, {bench}. Seed {seed}."
-        )
-    else:
-        records = {"identification": npipe.read_nozzle_record(args.data, args.input, args.output, args.dt)}
-        if args.validate is not None:
-            check = npipe.read_nozzle_record(args.validate, args.input, args.output, args.dt)
-            _check_same_dt(args.validate, check.dt, records["identification"].dt, "data")
-            records["validation"] = check
-        note = f"Data: {args.data}."
-        _make_dir(args.out)
-        print("identifying: DSR_e linear model, then the Bouc-Wen joint (evolutionary search, least squares)")
-        ident = npipe.identify_nozzle(
-            records["identification"], seed=seed, workers=args.workers, normalization_A=args.normalization_a
-        )
-        if "validation" in records:
-            ident.model.fit["validation_record"] = npipe.validate_nozzle(ident.model, records["validation"])
-    ident.model.save(args.out / "model.json")
-    if args.data is None:
-        (args.out / "data").mkdir(exist_ok=True)
-        for name, rec in records.items():
-            npipe.write_nozzle_record(args.out / "data" / f"nozzle_{name}.csv", rec)
-    path = write_nozzle_report(args.out, ident, records, truth, note)
-    lin = ident.model.linear
-    print(f"linear: J {lin['J']:.2f} kg m^2, b {lin['b']:.1f} N m s/rad, k {lin['k']:.4g} N m/rad")
-    print(f"Bouc-Wen: {ident.bouc_wen.reason}")
-    print(f"done in {time.perf_counter() - start:.1f} s; wrote {args.out / 'model.json'} and {path}")
-    return 0
+    lines = ["envs, their scenarios (default: all) and controllers (default: all; NAME:truth designs on"]
+    lines += ["the env's own plant instead of the identified model):"]
+    for env_id, scenarios in SCENARIOS.items():
+        lines.append(f"  {env_id}")
+        for label, names in (("scenarios", list(scenarios)), ("controllers", controller_names(env_id))):
+            text = f"{label}: {', '.join(names)}"
+            lines += textwrap.wrap(text, 96, initial_indent="    ", subsequent_indent="      ")
+    return "\n".join(lines)
 
 
 def _bench(args: argparse.Namespace) -> int:
@@ -356,19 +290,22 @@ def _bench(args: argparse.Namespace) -> int:
     unknown = [e for e in env_ids if e not in ENV_IDS]
     if unknown:
         raise _UsageError(f"unknown env {', '.join(unknown)}; choose from {', '.join(ENV_IDS)}")
+    check_vector_sizes(sizes, env_ids)
+    if args.out is not None and (args.out.is_dir() or not args.out.parent.is_dir()):
+        raise ValueError(f"--out {args.out}: must be a file in an existing directory")
     rows = run_benchmark(env_ids, sizes, args.rounds, progress=lambda m: print(m, file=sys.stderr))
     table = format_table(rows)
     print(table)
     if args.out is not None:
-        args.out.write_text("Command: `ssme-envs bench`\n\n" + table + "\n")
+        write_text(args.out, "Command: `ssme-envs bench`\n\n" + table + "\n")
     return 0
 
 
-def _controllers(env_id: str, specs: str | None) -> dict:
+def _controllers(env_id: str, specs: str | None, allow_pickle: bool = False) -> dict:
     from agents import controller_names, parse_controller
 
     names = controller_names(env_id) if specs is None else list(_names(specs, "--controllers"))
-    return {name: parse_controller(name, env_id) for name in names}
+    return {name: parse_controller(name, env_id, allow_pickle) for name in names}
 
 
 def _run_evaluation(env_id: str, controllers: dict, scenarios: list[str] | None, episodes: int, out: Path,
@@ -384,19 +321,19 @@ def _run_evaluation(env_id: str, controllers: dict, scenarios: list[str] | None,
 
 
 def _evaluate(args: argparse.Namespace) -> int:
-    from ssme_envs.evaluation import check_env_id, check_scenarios
+    from ssme_envs.evaluation import check_env_id, check_scenarios, scenario_names
 
     env_id = check_env_id(args.env)
-    if args.episodes < 1:
-        raise _UsageError(f"--episodes must be a positive integer, got {args.episodes}")
+    check_seed(args.seed)
     scenarios = None
     if args.scenario is not None:
         scenarios = check_scenarios(env_id, _names(args.scenario, "--scenario"))
-    controllers = _controllers(env_id, args.controllers)
-    _make_dir(args.out)
+    controllers = _controllers(env_id, args.controllers, args.allow_pickle)
+    check_episodes(args.episodes, {env_id: len(scenarios or scenario_names(env_id)) * len(controllers)})
     command = "ssme-envs " + " ".join(sys.argv[1:]) if sys.argv[1:2] == ["evaluate"] else "ssme-envs evaluate"
-    path, _ = _run_evaluation(env_id, controllers, scenarios, args.episodes, args.out, command, args.seed)
-    print(f"wrote {path}, {args.out / 'results.json'} and the plots")
+    with _output_directory(args) as out:
+        _run_evaluation(env_id, controllers, scenarios, args.episodes, out, command, args.seed)
+    print(f"wrote {args.out / 'results.md'}, {args.out / 'results.json'} and the plots")
     return 0
 
 
@@ -413,11 +350,13 @@ def _train(args: argparse.Namespace) -> int:
     check_env_id(config["env"])  # before the output directory is made
     _make_dir(args.out)
     summary = train(config, args.out)
+    kept = summary["kept"]
+    which = "final policy" if kept["model"] == "final" else "best evaluation's policy"
     print(
         f"trained {summary['algo']} on {summary['env']}: {summary['steps']:,} steps in "
-        f"{summary['seconds']:.0f} s ({summary['steps_per_s']:,.0f} steps/s), best evaluation return "
-        f"{summary['best_return']:.3f}; "
-        f"wrote {args.out / 'model.zip'}"
+        f"{summary['seconds']:.0f} s ({summary['steps_per_s']:,.0f} steps/s); kept the {which} "
+        f"({kept['steps']:,} steps, evaluation return {summary['best_return']:.3f}); "
+        f"wrote {args.out / 'policy.json'}, policy.safetensors and normalization.json"
     )
     return 0
 
@@ -425,63 +364,37 @@ def _train(args: argparse.Namespace) -> int:
 def _report(args: argparse.Namespace) -> int:
     from ssme_envs.main_report import REPORT_PLAN, write_main_report
 
-    if args.episodes < 1:
-        raise _UsageError(f"--episodes must be a positive integer, got {args.episodes}")
-    start = time.perf_counter()
-    _make_dir(args.out)
-    parser = build_parser()
-    print("identifying the engine (embedded experiment, five power levels) ...", file=sys.stderr)
-    _identify_engine(parser.parse_args(["identify", "engine", "--out", str(args.out / "engine")]))
-    print("identifying the nozzle (embedded bench test) ...", file=sys.stderr)
-    _identify_nozzle(parser.parse_args(["identify", "nozzle", "--out", str(args.out / "nozzle")]))
-    evaluations = {}
     learned = importlib.util.find_spec("stable_baselines3") is not None
-    if not learned:
-        print("stable-baselines3 is not installed: the report leaves out the PPO policies "
-              '(pip install ".[rl]")', file=sys.stderr)  # fmt: skip
-    for env_id, (specs, scenarios) in REPORT_PLAN.items():
+    plan = {
+        env_id: (",".join(s for s in specs.split(",") if learned or not s.startswith("ppo")), scenarios)
+        for env_id, (specs, scenarios) in REPORT_PLAN.items()
+    }
+    check_episodes(args.episodes, {e: len(s) * len(c.split(",")) for e, (c, s) in plan.items()})
+    start = time.perf_counter()
+    parser = build_parser()
+    with _output_directory(args) as out:
+        for plant, what in (("engine", "embedded experiment, five power levels"), ("nozzle", "bench test")):
+            print(f"identifying the {plant} ({what}) ...", file=sys.stderr)
+            sub = parser.parse_args(["identify", plant, "--out", str(args.out / plant)])
+            sub.work = out / plant  # inside this run's directory
+            (_identify_engine if plant == "engine" else _identify_nozzle)(sub)
         if not learned:
-            specs = ",".join(s for s in specs.split(",") if not s.startswith("ppo"))
-        folder = args.out / env_id.split("/")[-1]
-        command = (
-            f"ssme-envs evaluate --env {env_id} --controllers {specs} --scenario {','.join(scenarios)} "
-            f"--episodes {args.episodes} --out {folder}"
-        )
-        print(f"evaluating on {env_id} ...", file=sys.stderr)
-        _, evaluations[env_id] = _run_evaluation(
-            env_id, _controllers(env_id, specs), scenarios, args.episodes, folder, command
-        )
-    path = write_main_report(args.out, evaluations, args.episodes, time.perf_counter() - start)
-    print(f"report: {path} ({time.perf_counter() - start:.0f} s)")
-    return 0
-
-
-def _validate_engine(args: argparse.Namespace) -> int:
-    import numpy as np
-
-    from ssme_envs.identification import pipeline, report
-    from ssme_envs.identification.metrics import validate
-    from ssme_envs.identification.records import record_labels
-    from ssme_envs.models.statespace import AlphaCanonicalModel
-
-    model = AlphaCanonicalModel.load(args.model)
-    labels = record_labels(args.data)  # two files called run.csv become run and run_2
-    records = {}
-    for path, label in zip(args.data, labels, strict=True):  # every record is read and checked first
-        record = pipeline.read_record(path, model.input_names, model.output_names, args.dt)
-        _check_same_dt(path, record.dt, model.dt, "model")
-        _check_record(path, record)
-        records[label] = record
-    validation = {}
-    for path, label in zip(args.data, labels, strict=True):
-        with np.errstate(all="ignore"):  # an overflow is refused just below, without warnings
-            validation[label] = validate(model, records[label].u, records[label].y)
-        _check_scores(path, validation[label], model.output_names)
-        see = [round(v, 5) for v in validation[label]["model"]["see"]]
-        named = "" if label == path.stem else f" (reported as {label})"
-        print(f"{path}{named}: model SEE {see}")
-    _make_dir(args.out)
-    print(f"report: {report.write_record_report(args.out, model, records, validation)}")
+            print("stable-baselines3 is not installed: the report leaves out the PPO policies "
+                  '(pip install ".[rl]")', file=sys.stderr)  # fmt: skip
+        evaluations = {}
+        for env_id, (specs, scenarios) in plan.items():
+            folder = env_id.split("/")[-1]
+            command = (
+                f"ssme-envs evaluate --env {env_id} --controllers {specs} --scenario {','.join(scenarios)} "
+                f"--episodes {args.episodes} --out {args.out / folder}"
+            )
+            print(f"evaluating on {env_id} ...", file=sys.stderr)
+            _, evaluations[env_id] = _run_evaluation(
+                env_id, _controllers(env_id, specs), scenarios, args.episodes, out / folder, command
+            )
+        seconds = time.perf_counter() - start
+        write_main_report(out, evaluations, args.episodes, seconds, shown=args.out)
+    print(f"report: {args.out / 'report.md'} ({time.perf_counter() - start:.0f} s)")
     return 0
 
 
@@ -492,29 +405,41 @@ def _make_dir(path: Path) -> None:
         raise ValueError(f"cannot create output directory {path}: {exc.strerror}") from None
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point; returns the process exit code."""
-    parser = build_parser()
-    try:
-        args = parser.parse_args(argv)
-        if args.command == "identify" and args.plant == "engine":
-            return _identify_engine(args)
-        if args.command == "identify" and args.plant == "nozzle":
-            return _identify_nozzle(args)
-        if args.command == "bench":
-            return _bench(args)
-        if args.command == "evaluate":
-            return _evaluate(args)
-        if args.command == "report":
-            return _report(args)
-        if args.command == "train":
+def _dispatch(args: argparse.Namespace) -> int:
+    if args.command == "identify":
+        return (_identify_engine if args.plant == "engine" else _identify_nozzle)(args)
+    if args.command == "bench":
+        return _bench(args)
+    if args.command == "evaluate":
+        return _evaluate(args)
+    if args.command == "report":
+        return _report(args)
+    if args.command == "train":  # locked; train writes into --out itself
+        with run_directory(args.out, stage=False):
             return _train(args)
-        if args.command == "validate" and args.plant == "engine":
-            return _validate_engine(args)
-    except (_UsageError, ValueError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
+    if args.command == "validate" and args.plant == "engine":
+        return _validate_engine(args)
+    raise _UsageError(f"unknown command {args.command}")  # pragma: no cover
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point; returns the process exit code: 0, 2 for an error (one line ``error: ...`` on
+    stderr, no traceback), 130 when interrupted (Ctrl-C)."""
+    try:
+        with sigint_in_main_process():
+            return _dispatch(build_parser().parse_args(argv))
+    except _UsageError as exc:
+        print((exc.usage + "\n" if exc.usage else "") + f"error: {one_line(str(exc))}", file=sys.stderr)
         return 2
-    return 2
+    except KeyboardInterrupt:
+        print("error: interrupted (Ctrl-C)", file=sys.stderr)
+        return 130
+    except Exception as exc:
+        text = error_line(exc)
+        if text is None:  # a bug: keep its traceback
+            raise
+        print(f"error: {one_line(text)}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":

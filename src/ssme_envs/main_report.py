@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from ssme_envs.evaluation import scenarios_of
+from ssme_envs.outputs import write_text
 
 TRACKING = "ssme_envs/EngineTracking-v0"
 THROTTLE = "ssme_envs/EngineThrottle-v0"
@@ -167,15 +168,23 @@ def nozzle_tables(results: dict) -> list[str]:
 
 
 def write_main_report(
-    out: Path, evaluations: dict[str, dict[str, Any]], episodes: int, seconds: float
+    out: Path,
+    evaluations: dict[str, dict[str, Any]],
+    episodes: int,
+    seconds: float,
+    shown: Path | None = None,
 ) -> Path:
     """report.md under ``out`` from the identification reports in out/engine and out/nozzle and
-    the evaluations (``{env_id: evaluate() results}``, written to out/<env name>/)."""
+    the evaluations (``{env_id: evaluate() results}``, written to out/<env name>/).
+
+    ``shown`` is the --out of the command line quoted in the report (default ``out``), when
+    ``out`` is the temporary directory the run is built in.
+    """
     lines = [
         "# ssme-envs: identification and controller comparison",
         "",
-        f"Command: `ssme-envs report --out {out} --episodes {episodes}` ({seconds:.0f} s). Every number "
-        "below comes from a seeded run and is reproduced bit for bit by the same command.",
+        f"Command: `ssme-envs report --out {shown or out} --episodes {episodes}` ({seconds:.0f} s). "
+        "Every number below comes from a seeded run and is reproduced bit for bit by the same command.",
         "",
         "## Controllers",
         "",
@@ -202,7 +211,7 @@ def write_main_report(
         if (out / folder / "report.md").exists():
             lines += [*_embedded(out / folder / "report.md", folder), ""]
     path = out / "report.md"
-    path.write_text("\n".join(lines) + "\n")
+    write_text(path, "\n".join(lines) + "\n")
     return path
 
 

@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from ssme_envs.evaluation import LAYOUTS, Rollout, scenarios_of
+from ssme_envs.outputs import save_figure, write_text
 
 
 def _clean(value: Any) -> Any:
@@ -88,7 +89,7 @@ def plot_scenario(env_id: str, scenario: str, runs: dict[str, Rollout], path: Pa
     axes[-1, 0].set_xlabel("time (s)")
     fig.suptitle(f"{env_id}: {scenario} (first episode)")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     plt.close(fig)
 
 
@@ -97,7 +98,7 @@ def write_evaluation(env_id: str, results: dict[str, Any], out: Path, command: s
     out.mkdir(parents=True, exist_ok=True)
     scenarios = scenarios_of(results)
     data = {"env": env_id, "command": command, "scenarios": {s: results[s] for s in scenarios}}
-    (out / "results.json").write_text(json.dumps(_clean(data), indent=1) + "\n")
+    write_text(out / "results.json", json.dumps(_clean(data), indent=1) + "\n")
     lines = [f"# Evaluation on {env_id}", "", f"Command: `{command}`", ""]
     lines += [
         "Return: mean ± std over the episodes (higher is better); cost CVaR90: mean cost of the worst 10 %; "
@@ -113,7 +114,7 @@ def write_evaluation(env_id: str, results: dict[str, Any], out: Path, command: s
         plot_scenario(env_id, scenario, runs, out / figure)
         lines += [scenario_table(env_id, scenario, results[scenario]), "", f"![{scenario}]({figure})", ""]
     path = out / "results.md"
-    path.write_text("\n".join(lines))
+    write_text(path, "\n".join(lines))
     return path
 
 

@@ -207,7 +207,9 @@ class EngineThrottleEnv(EngineTrackingEnv):
     Truncation at the end of the profile (default: the time-compressed mission, 60 s, 1500 steps).
     ``gymnasium.make`` also applies the registered limit of 1500 steps: for a longer profile pass
     ``max_episode_steps`` too. Faults act on the absolute valve commands (a stuck valve holds its
-    position whatever the schedule).
+    position whatever the schedule). ``step`` after the episode ended raises
+    :class:`~ssme_envs.envs.tracking_env.EpisodeOverError` and ``reset`` takes no options, as in
+    ``EngineTracking-v0``.
 
     ## Arguments
     profile : list of (time s, power %) breakpoints within 65-109 % (default: the mission).

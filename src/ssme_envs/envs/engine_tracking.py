@@ -23,6 +23,7 @@ from ssme_envs.models.engine import (
     POWER_LEVELS,
     StepParameters,
     TruthConfig,
+    check_stable_plant,
     identified_model,
     output_coupling,
     step_arrays,
@@ -134,6 +135,7 @@ class EngineTask:
                 f"{list(model.observability_indices)}): the engine environments step models whose "
                 "outputs are their last two states; identify with --indices 2,2"
             )
+        check_stable_plant(model)
         config = resolve_truth(truth)
         check_reference(reference)
         try:
@@ -446,7 +448,12 @@ class EngineTrackingEnv(TrackingEnv):
     ## Episode End
     Termination on leaving the envelope; truncation after ``episode_seconds`` (10 s, 250 steps).
     ``gymnasium.make`` also applies the registered limit of 250 steps: for longer episodes pass
-    ``max_episode_steps`` too.
+    ``max_episode_steps`` too. ``step`` after ``terminated`` or ``truncated`` (or before the first
+    ``reset``) raises :class:`~ssme_envs.envs.tracking_env.EpisodeOverError` (a ``ValueError``
+    and an ``AssertionError``, as gymnasium's ``SyncVectorEnv`` refuses it in DISABLED autoreset
+    mode): call ``reset``. (gymnasium's ``TimeLimit`` wrapper does not check: behind a limit
+    shorter than the episode the env steps on.) ``reset`` takes no options: ``options`` must be
+    None or ``{}``, else TypeError (not a dict) or ValueError (naming the unknown keys).
 
     ## Arguments
     power : 65-109 %, default 100. plant : "truth" (default), "identified" (at 70, 80, 90, 100 %), a
@@ -466,7 +473,7 @@ class EngineTrackingEnv(TrackingEnv):
     build_task = staticmethod(EngineTask.build)
 
     def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[np.ndarray, dict]:
-        refs, noise, obs = self._draw_episode(seed)
+        refs, noise, obs = self._draw_episode(seed, options)
         self._refs = refs.T.tolist()
         self._noise = noise.T.astype(np.float64).tolist()
         self._state = [self.task.initial_plant_floats(), [0.0, 0.0], [0.0, 0.0], 0.0]
@@ -483,8 +490,7 @@ class EngineTrackingEnv(TrackingEnv):
         except (TypeError, ValueError, IndexError):
             raise ValueError(f"action must be 2 numbers (OPOV, FPOV), got {action!r}") from None
         check_action_values(a0, a1)
-        if self._t >= self.task.horizon:
-            raise ValueError("the episode is over (truncated): call reset() before step()")
+        self._check_running()
         a0, a1 = min(max(a0, -1.0), 1.0), min(max(a1, -1.0), 1.0)
         t = self._t + 1
         self._state, obs, reward, terminated = scalar_step(
@@ -498,7 +504,9 @@ class EngineTrackingEnv(TrackingEnv):
                 self.render()
         out = np.array(obs, dtype=np.float32)
         np.minimum(np.maximum(out, self._low, out=out), self._high, out=out)  # np.clip, without its overhead
-        return out, reward, terminated, t >= self.task.horizon, {}
+        truncated = t >= self.task.horizon
+        self._ended = "terminated" if terminated else "truncated" if truncated else ""
+        return out, reward, terminated, truncated, {}
 
 
 __all__ = ["EngineTask", "EngineTrackingEnv", "batch_step", "initial_observation", "scalar_step"]

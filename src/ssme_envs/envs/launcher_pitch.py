@@ -16,6 +16,7 @@ import scipy.linalg
 from ssme_envs.envs.nozzle_tvc import (
     ARRAY_OPS,
     DEG,
+    ENV_STEP_RATE,
     NozzleTask,
     NozzleTVCEnv,
     _number,
@@ -23,7 +24,7 @@ from ssme_envs.envs.nozzle_tvc import (
     resolve_nozzle,
 )
 from ssme_envs.envs.references import Fault
-from ssme_envs.models.nozzle import NozzleModel, NozzleParameters
+from ssme_envs.models.nozzle import MAX_SUBSTEPS, NozzleModel, NozzleParameters, integration_substeps
 
 LAUNCHER_DT = 0.02  # s, a 50 Hz attitude loop
 SERVO_SUBSTEPS = 10  # nozzle servo and integration steps per attitude step: a 500 Hz servo
@@ -74,6 +75,10 @@ class LauncherTask(NozzleTask):
     max_deflection: float = math.radians(3.0)  # rad, the action's full scale
     servo: tuple = field(init=False, repr=False)
     body: tuple = field(init=False, repr=False)
+    # RK4 steps per servo sample (the torque held over it): the nozzle rule of
+    # models.nozzle.integration_substeps for a 2 ms sample, 1 for Table 1's and the identified
+    # joints; a plant that needs more than MAX_SUBSTEPS per attitude step is refused
+    rk4_substeps: int = field(init=False, repr=False)
 
     @classmethod
     def build_launcher(
@@ -104,6 +109,16 @@ class LauncherTask(NozzleTask):
         object.__setattr__(self, "servo", nozzle_servo_gains(self.plant))
         h = self.dt / self.substeps
         object.__setattr__(self, "body", body_transition(self.instability, self.effectiveness, h))
+        rk4_substeps = integration_substeps(
+            self.plant,
+            h,
+            2.0 * self.max_deflection,  # the nozzle's travel: twice the command range, as NozzleTVC's
+            self.torque_limit,
+            ENV_STEP_RATE,
+            max_substeps=MAX_SUBSTEPS // self.substeps,
+            sample="servo sample",
+        )
+        object.__setattr__(self, "rk4_substeps", rk4_substeps)
 
     @staticmethod
     def observation_space() -> gym.spaces.Box:
@@ -131,7 +146,8 @@ class LauncherTask(NozzleTask):
             servo_gain = ops.where(t > self.fault_step, fault.magnitude, 1.0)
         p00, p01, p10, p11, g0_theta, g0_q, g1_theta, g1_q = self.body
         h = self.dt / self.substeps
-        params = self.rk4_params
+        params, rk4_steps = self.rk4_params, self.rk4_substeps
+        rk4_h = h / rk4_steps  # h itself for one step
         for _ in range(self.substeps):
             d = nozzle[0]
             torque = ops.clip(drive - k_p * d - k_d * nozzle[1], -lim, lim)
@@ -140,7 +156,7 @@ class LauncherTask(NozzleTask):
             # the body's share of the old deflection is taken before the nozzle moves (in place)
             theta_next = p00 * theta + p01 * q + g0_theta * d
             q_next = p10 * theta + p11 * q + g0_q * d
-            nozzle = ops.integrate(nozzle, torque, h, 1, params)
+            nozzle = ops.integrate(nozzle, torque, rk4_h, rk4_steps, params)
             d = nozzle[0]
             theta, q = theta_next + g1_theta * d, q_next + g1_q * d
         m, e, integral, reward, terminated = self._score(theta, a, prev, t, ref, noise, integral, ops)
@@ -159,7 +175,12 @@ class LauncherPitchEnv(NozzleTVCEnv):
     position servo designed on its linear stiffness (15 Hz, 0.7 damping, stiffness
     feedforward; torque limit 3e4 N m): the servo does not see the joint's hysteresis, the
     attitude loop does. The body is integrated exactly with the deflection linear between servo
-    samples, the nozzle by RK4 at each 2 ms servo sample.
+    samples, the nozzle by RK4 over each 2 ms servo sample with the servo's torque held: one RK4
+    step for Table 1's and the identified joints, more where NozzleTVC's substep rule (accuracy
+    and RK4 stability for the stiffness, damping and hysteresis rates) asks for them at 2 ms. A
+    plant that needs more than 1,000 per servo sample (10,000 per attitude step) is refused
+    with a ValueError naming the rate. The servo and the body are discrete, exact per sample:
+    they add no rate to the RK4 bound.
 
     ## Action Space
     ``Box(-1, 1, (1,), float32)``: the nozzle deflection command as a fraction of 3 deg. Out-of-
@@ -188,7 +209,11 @@ class LauncherPitchEnv(NozzleTVCEnv):
 
     ## Episode End
     Termination on leaving the envelope; truncation after ``episode_seconds`` (10 s, 500 steps
-    of 0.02 s).
+    of 0.02 s). ``step`` after either raises
+    :class:`~ssme_envs.envs.tracking_env.EpisodeOverError` and ``reset`` takes no options, as in
+    ``NozzleTVC-v0``. A step whose state overflows or turns NaN ends the episode with
+    ``info == {"nonfinite": True}``, a finite reward and observation, as in ``NozzleTVC-v0``
+    (alike in the native vector env and ``SyncVectorEnv``).
 
     ## Arguments
     plant : "bouc_wen" (default), "linear", "identified", a nozzle model.json path or a model.

@@ -16,13 +16,15 @@ from ssme_envs.envs.references import Fault, check_reference, reference_signals,
 from ssme_envs.envs.tracking_env import TrackingEnv
 from ssme_envs.models.nozzle import (
     DEFAULT_TORQUE_LIMIT,
+    MAX_SUBSTEPS,
     NOZZLE_DT,
     NozzleModel,
     NozzleParameters,
     RK4Parameters,
+    check_stable_substeps,
     identified_nozzle,
+    integration_substeps,
     published_nozzle,
-    recommended_substeps,
     rk4_arrays,
     rk4_floats,
     rk4_parameters,
@@ -32,6 +34,9 @@ DEG = 180.0 / math.pi
 # RK4 substeps per sample by h * rate <= 0.25 (models.nozzle.recommended_substeps): 3 for Table 1,
 # within 3e-4 of the motion (9e-4 deg on 3 deg, a sixth of the default sensor noise) where 4
 # substeps give 2e-4 at a third more cost (experiments/results/nozzle_integration_accuracy.md).
+# models.nozzle.integration_substeps adds RK4's stability rule (stiffness, damping and hysteresis
+# rates at h * rate <= 1.3, half the stability limit) and refuses plants that need more than
+# MAX_SUBSTEPS; the accuracy rule sets the count of Table 1's and the identified joints.
 ENV_STEP_RATE = 0.25
 NOZZLE_FAULTS = ("sensor_bias", "gain_loss")
 OBS_NAMES = ("angle_deg", "rate_deg_s", "ref_deg", "err_deg", "err_int_deg_s", "prev_action")
@@ -157,9 +162,13 @@ class NozzleTask:
             rate_limit = _number("rate_limit", rate_limit, 0.0, math.inf, low_open=True)
         envelope = math.radians(6.0)
         if substeps is None:
-            substeps = recommended_substeps(params, NOZZLE_DT, envelope, ENV_STEP_RATE)
-        elif not isinstance(substeps, int) or isinstance(substeps, bool) or not 1 <= substeps <= 1000:
-            raise ValueError(f"substeps must be an integer in 1-1000, got {substeps!r}")
+            substeps = integration_substeps(
+                params, NOZZLE_DT, envelope, DEFAULT_TORQUE_LIMIT, ENV_STEP_RATE, sample="step"
+            )
+        elif not isinstance(substeps, int) or isinstance(substeps, bool) or not 1 <= substeps <= MAX_SUBSTEPS:
+            raise ValueError(f"substeps must be an integer in 1-{MAX_SUBSTEPS}, got {substeps!r}")
+        else:  # the caller's count: accuracy is theirs, stability is checked
+            check_stable_substeps(params, substeps, NOZZLE_DT, envelope, DEFAULT_TORQUE_LIMIT)
         return cls(
             plant=params,
             substeps=substeps,
@@ -276,6 +285,12 @@ class NozzleTask:
         reward = reward - (self.step_cost_bound * (self.horizon - t + 1)) * terminated
         return m, e, integral, reward, terminated
 
+    def nonfinite_reward(self, t: Any) -> Any:
+        """The reward of step ``t`` (an int or an int array) whose own reward came out NaN or
+        infinite (the plant's state overflowed): the envelope penalty plus the worst cost of a
+        step inside the envelope, ``-(horizon - t + 2) step_cost_bound``, finite."""
+        return -self.step_cost_bound * (self.horizon - t + 2)
+
     def batch_step(
         self,
         state: list,
@@ -299,6 +314,16 @@ class NozzleTVCEnv(TrackingEnv):
     with the flexible joint's restoring torque F hysteretic (Bouc-Wen, Table 1 of the nozzle
     paper) by default, or linear, or any nozzle model.json; RK4 with ``substeps`` per 0.008 s step
     (3 for Table 1's joint: within 1e-3 deg of a fine-step simulation, tested). Angles in degrees.
+
+    The substep count is computed once per plant
+    (:func:`~ssme_envs.models.nozzle.integration_substeps`): the larger of an accuracy rule
+    (``h omega_n <= 0.25``, hysteresis included) and a stability rule that keeps ``h * rate <=
+    1.3`` (half of RK4's 2.61 limit for any eigenvalue in the left half-plane) for the stiffness
+    ``sqrt(k/J)``, the damping ``b/J`` and the Bouc-Wen hysteresis rate
+    (:func:`~ssme_envs.models.nozzle.stiff_rates`).
+    A plant that needs more than 10,000 substeps per step is refused with a ValueError naming
+    the rate and its parameters; so is a ``substeps`` argument below the stability rule's count.
+    The actuator lag and rate limit act once per step, exactly: they need no substeps.
 
     ## Action Space
     ``Box(-1, 1, (1,), float32)``: the torque command as a fraction of the actuator's full scale
@@ -328,6 +353,20 @@ class NozzleTVCEnv(TrackingEnv):
 
     ## Episode End
     Termination on leaving the envelope; truncation after ``episode_seconds`` (4 s, 500 steps).
+    ``step`` after either (or before the first ``reset``) raises
+    :class:`~ssme_envs.envs.tracking_env.EpisodeOverError`: call ``reset``, which takes no options
+    (None or ``{}``; else TypeError or ValueError), as in ``EngineTracking-v0``.
+
+    Non-finite state: should the plant's state overflow or turn NaN anyway (the substep rule
+    is meant to prevent it; its speed bounds are estimates), the step's reward comes out NaN or
+    infinite and the step ends the episode instead of handing it out: ``terminated=True``,
+    ``info == {"nonfinite": True}`` (otherwise the info is ``{}``), reward ``-(horizon - t + 2)
+    * step_cost_bound`` (the envelope penalty plus the worst in-envelope step, finite), and the
+    observation with NaN entries 0 and infinite ones at their bounds. It ends the episode
+    rather than raising because one raising sub-env would stop a whole vector env (and a
+    training run), while a terminated episode resets like any other; the native vector env
+    and gymnasium's ``SyncVectorEnv`` give the same values and infos (``info["nonfinite"]``
+    with its ``_nonfinite`` mask, under ``final_info`` in SAME_STEP autoreset mode).
 
     ## Arguments
     plant : "bouc_wen" (default), "linear", "identified", a nozzle model.json path or a model.
@@ -335,8 +374,8 @@ class NozzleTVCEnv(TrackingEnv):
     "zero", "mixed" (each episode one of random_steps, step, ramp, sine_sweep, attitude: for
     training); reference_amplitude_deg (0-3, default 3). sensor_noise (rad, default 1e-4).
     fault : ``{"kind": "gain_loss", "time": 2.0, "magnitude": 0.5}`` or ``{"kind": "sensor_bias",
-    "time": 2.0, "magnitude": 0.005}`` (rad). episode_seconds, actuator_lag, rate_limit, substeps.
-    render_mode : "human" or "rgb_array".
+    "time": 2.0, "magnitude": 0.005}`` (rad). episode_seconds, actuator_lag, rate_limit, substeps
+    (1-10,000; default the rule's count). render_mode : "human" or "rgb_array".
     """
 
     output_names = ("nozzle angle",)
@@ -346,7 +385,7 @@ class NozzleTVCEnv(TrackingEnv):
     build_task: Callable[..., NozzleTask] = staticmethod(NozzleTask.build)
 
     def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[np.ndarray, dict]:
-        refs, noise, obs = self._draw_episode(seed)
+        refs, noise, obs = self._draw_episode(seed, options)
         self._refs = refs[0].tolist()
         self._noise = noise[0].astype(np.float64).tolist()
         self._state = [(0.0, 0.0, 0.0), 0.0, 0.0, 0.0, 0.0]
@@ -369,8 +408,7 @@ class NozzleTVCEnv(TrackingEnv):
             raise ValueError(f"action must be 1 number ({self.action_meaning}), got {action!r}") from None
         if not math.isfinite(a):
             raise ValueError(f"action must be finite, got {a} (NaN or inf)")
-        if self._t >= self.task.horizon:
-            raise ValueError("the episode is over (truncated): call reset() before step()")
+        self._check_running()
         a = min(max(a, -1.0), 1.0)
         t = self._t + 1
         self._state, obs, reward, terminated = self.task.step(
@@ -383,7 +421,13 @@ class NozzleTVCEnv(TrackingEnv):
                 self.render()
         out = np.array(obs, dtype=np.float32)
         np.minimum(np.maximum(out, self._low, out=out), self._high, out=out)
-        return out, float(reward), bool(terminated), t >= self.task.horizon, {}
+        info = {}
+        if not math.isfinite(reward):  # the state overflowed or went NaN: end the episode (see Episode End)
+            reward, terminated, info = self.task.nonfinite_reward(t), True, {"nonfinite": True}
+            np.nan_to_num(out, copy=False, nan=0.0)
+        terminated, truncated = bool(terminated), t >= self.task.horizon
+        self._ended = "terminated" if terminated else "truncated" if truncated else ""
+        return out, float(reward), terminated, truncated, info
 
 
 __all__ = ["NozzleTVCEnv", "NozzleTask", "resolve_nozzle"]

@@ -5,6 +5,13 @@ native vector env (created in SAME_STEP autoreset mode, SB3's convention) as an 
 finished sub-envs are reset within the step, the last observation of the episode goes to
 ``info["terminal_observation"]`` and truncations are marked ``info["TimeLimit.truncated"]``.
 
+The rest of SB3's contract holds per sub-env, as in its ``DummyVecEnv``: ``seed(seed)`` gives
+sub-env ``i`` the seed ``seed + i`` at the next ``reset`` (then the streams continue);
+``set_options`` reaches the next ``reset`` only; ``get_attr``, ``set_attr`` and ``env_method``
+act on the indexed sub-envs only, through the vector env's per-sub-env views
+(:class:`~ssme_envs.envs.vector.SubEnv`: what cannot be done to one sub-env alone raises
+AttributeError rather than acting on all), or on the sub-env objects of a ``SyncVectorEnv``.
+
 Usage::
 
     from ssme_envs.envs.sb3_adapter import make_sb3_vec_env
@@ -14,63 +21,144 @@ Usage::
 
 from __future__ import annotations
 
+import warnings
+from collections.abc import Sequence
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 from gymnasium.vector import AutoresetMode
-from stable_baselines3.common.vec_env.base_vec_env import VecEnv
+from stable_baselines3.common.env_util import is_wrapped
+from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices, VecEnvStepReturn
+
+FINAL_KEYS = ("final_obs", "_final_obs", "final_info", "_final_info")
 
 
 class SB3VecEnv(VecEnv):
-    """An SB3 ``VecEnv`` over a gymnasium vector env in SAME_STEP autoreset mode."""
+    """An SB3 ``VecEnv`` over a gymnasium vector env in SAME_STEP autoreset mode.
+
+    Parameters
+    ----------
+    vector_env
+        A native vector env (:class:`~ssme_envs.envs.vector.TrackingVectorEnv`, possibly inside
+        gymnasium vector wrappers) or a ``SyncVectorEnv``, in SAME_STEP autoreset mode.
+    seed
+        Seeds of the first ``reset`` (sub-env ``i`` gets ``seed + i``), as ``seed(seed)``;
+        None: the sub-envs' generators as they are.
+    """
 
     def __init__(self, vector_env: gym.vector.VectorEnv, seed: int | None = None) -> None:
         if vector_env.metadata.get("autoreset_mode") != AutoresetMode.SAME_STEP:
             raise ValueError("the vector env must use autoreset_mode=SAME_STEP (SB3 resets within the step)")
+        base = vector_env.unwrapped
+        if hasattr(base, "sub_env"):
+            self._sub_envs = [base.sub_env(i) for i in range(base.num_envs)]
+        elif hasattr(base, "envs"):
+            self._sub_envs = list(base.envs)
+        else:
+            raise TypeError(
+                f"{type(base).__name__} has neither sub_env(i) nor envs: no per-sub-env access for SB3"
+            )
         self.venv = vector_env
         super().__init__(
             vector_env.num_envs, vector_env.single_observation_space, vector_env.single_action_space
         )
-        self._seed = seed
+        if seed is not None:
+            self.seed(seed)
         self._actions: np.ndarray | None = None
 
     def reset(self) -> np.ndarray:
-        obs, _ = self.venv.reset(seed=self._seed)
-        self._seed = None  # later resets continue the sub-envs' streams
+        """Reset every sub-env with the seeds and options set since the last reset (each used
+        once); sub-envs with different options reset in groups (partial resets)."""
+        groups: list[tuple[dict[str, Any], np.ndarray]] = []
+        for i, options in enumerate(self._options):
+            if "reset_mask" in options:
+                raise ValueError("set_options: 'reset_mask' is not an option of a sub-env (reset resets all)")
+            for same, mask in groups:
+                if same == options:
+                    mask[i] = True
+                    break
+            else:
+                groups.append((options, np.arange(self.num_envs) == i))
+        for options, mask in groups:
+            if len(groups) > 1:
+                options = {**options, "reset_mask": mask}
+            obs, info = self.venv.reset(seed=list(self._seeds), options=options or None)
+            for i in np.flatnonzero(mask):
+                self.reset_infos[i] = _sub_info(info, i)
+        self._reset_seeds()
+        self._reset_options()
         return obs
 
     def step_async(self, actions: np.ndarray) -> None:
         self._actions = np.asarray(actions)
 
-    def step_wait(self):
+    def step_wait(self) -> VecEnvStepReturn:
         obs, rewards, terminated, truncated, info = self.venv.step(self._actions)
         dones = terminated | truncated
         infos: list[dict[str, Any]] = [{} for _ in range(self.num_envs)]
+        if any(key not in FINAL_KEYS for key in info):  # step infos beside the final observations
+            infos = [_sub_info(info, i) for i in range(self.num_envs)]
         for i in np.flatnonzero(dones):
+            # SAME_STEP: the ending step's info is in final_info, the reset's at the top
+            self.reset_infos[i] = infos[i]
+            infos[i] = _sub_info(info["final_info"], i)
             infos[i]["terminal_observation"] = info["final_obs"][i]
             infos[i]["TimeLimit.truncated"] = bool(truncated[i] and not terminated[i])
         return obs, rewards.astype(np.float32), dones, infos
 
-    def seed(self, seed: int | None = None) -> list[int | None]:
-        self._seed = seed
-        return [None if seed is None else seed + i for i in range(self.num_envs)]
-
     def close(self) -> None:
         self.venv.close()
 
-    def get_attr(self, attr_name: str, indices=None) -> list[Any]:
-        return [getattr(self.venv, attr_name)] * len(self._get_indices(indices))
+    def get_images(self) -> Sequence[np.ndarray | None]:
+        if self.render_mode != "rgb_array":
+            warnings.warn(f"The render mode is {self.render_mode}, get_images needs rgb_array", stacklevel=2)
+            return [None] * self.num_envs
+        return [env.render() for env in self._sub_envs]
 
-    def set_attr(self, attr_name: str, value: Any, indices=None) -> None:
-        setattr(self.venv, attr_name, value)
+    def get_attr(self, attr_name: str, indices: VecEnvIndices = None) -> list[Any]:
+        """The attribute of each indexed sub-env (AttributeError if a sub-env has none)."""
+        return [env.get_wrapper_attr(attr_name) for env in self._targets(indices)]
 
-    def env_method(self, method_name: str, *method_args, indices=None, **method_kwargs) -> list[Any]:
-        result = getattr(self.venv, method_name)(*method_args, **method_kwargs)
-        return [result] * len(self._get_indices(indices))
+    def set_attr(self, attr_name: str, value: Any, indices: VecEnvIndices = None) -> None:
+        """Set the attribute on each indexed sub-env (AttributeError where it is not per sub-env)."""
+        for env in self._targets(indices):
+            setattr(env, attr_name, value)
 
-    def env_is_wrapped(self, wrapper_class, indices=None) -> list[bool]:
-        return [False] * len(self._get_indices(indices))
+    def env_method(
+        self, method_name: str, *method_args: Any, indices: VecEnvIndices = None, **method_kwargs: Any
+    ) -> list[Any]:
+        """Call the method of each indexed sub-env; the results."""
+        return [
+            env.get_wrapper_attr(method_name)(*method_args, **method_kwargs) for env in self._targets(indices)
+        ]
+
+    def env_is_wrapped(self, wrapper_class: type, indices: VecEnvIndices = None) -> list[bool]:
+        """Whether each indexed sub-env is wrapped by ``wrapper_class``: a gymnasium wrapper of a
+        ``SyncVectorEnv``'s sub-env, or a vector wrapper around the whole vector env."""
+        targets = self._targets(indices)
+        if self._sub_envs and isinstance(self._sub_envs[0], gym.Env):
+            return [is_wrapped(env, wrapper_class) for env in targets]
+        env, wrapped = self.venv, False
+        while isinstance(env, gym.vector.VectorWrapper):
+            wrapped = wrapped or isinstance(env, wrapper_class)
+            env = env.env
+        return [wrapped] * len(targets)
+
+    def _targets(self, indices: VecEnvIndices) -> list[Any]:
+        return [self._sub_envs[i] for i in self._get_indices(indices)]
+
+
+def _sub_info(info: dict[str, Any], i: int) -> dict[str, Any]:
+    """Sub-env ``i``'s entries of a gymnasium vector info dict (values batched, ``_key`` masks
+    marking the sub-envs that have the key; nested for dict values), SAME_STEP's final
+    observation and info left out."""
+    out = {}
+    for key, value in info.items():
+        if key in FINAL_KEYS or key.startswith("_") or not info.get(f"_{key}", np.ones(i + 1, bool))[i]:
+            continue
+        out[key] = _sub_info(value, i) if isinstance(value, dict) else value[i]
+    return out
 
 
 def make_sb3_vec_env(env_id: str, num_envs: int, seed: int | None = None, **options: Any) -> SB3VecEnv:

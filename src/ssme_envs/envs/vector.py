@@ -6,12 +6,17 @@ A task provides ``horizon``, ``n_actions``, ``observation_space()``, ``draw_size
 ``initial_observation(refs, noise)`` and ``batch_step(state, actions, t, refs, noise, synced)``.
 Sub-env ``i`` is seeded with ``seed + i`` and draws its episodes from its own
 generator exactly as the scalar env does, so the vector env equals gymnasium's
-``SyncVectorEnv`` of the scalar env bit for bit, in either autoreset mode.
+``SyncVectorEnv`` of the scalar env bit for bit, in each autoreset mode (NEXT_STEP, SAME_STEP,
+DISABLED) and through partial resets (``reset(options={"reset_mask": mask})``).
 """
 
 from __future__ import annotations
 
+import copy
+import dataclasses
 import math
+import operator
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import gymnasium as gym
@@ -24,14 +29,43 @@ from ssme_envs.envs.engine_throttle import ThrottleTask
 from ssme_envs.envs.engine_tracking import EngineTask
 from ssme_envs.envs.launcher_pitch import LauncherTask
 from ssme_envs.envs.nozzle_tvc import NozzleTask
+from ssme_envs.envs.tracking_env import EpisodeOverError, check_reset_options
+
+RESET_OPTIONS = {"reset_mask": "a numpy bool array of shape (num_envs,), at least one True"}
+# what ``gymnasium.make_vec`` adds to a vector env's spec kwargs beside the scalar env's own
+VECTOR_KWARGS = ("num_envs", "vectorization_mode", "vector_kwargs", "wrappers", "autoreset_mode")
 
 
 class TrackingVectorEnv(VectorEnv):
     """``num_envs`` copies of a tracking env as one batch (subclasses name the task).
 
-    Options are those of the scalar env; ``autoreset_mode`` is gymnasium's NEXT_STEP (default,
-    like ``SyncVectorEnv``) or SAME_STEP (final observation in ``info["final_obs"]``);
-    ``max_episode_steps`` truncates episodes like the TimeLimit wrapper of the scalar env.
+    Options are those of the scalar env; ``max_episode_steps`` truncates episodes like the
+    TimeLimit wrapper of the scalar env. ``autoreset_mode``, as gymnasium's ``SyncVectorEnv``:
+
+    - NEXT_STEP (default): the step after an episode's end resets that sub-env (reward 0, not
+      terminated or truncated).
+    - SAME_STEP: the ending step resets it; the final observation is in ``info["final_obs"]``.
+    - DISABLED: nothing resets by itself; reset ended sub-envs with
+      ``reset(options={"reset_mask": mask})``. Stepping while a sub-env's episode is over (or
+      before the first reset) raises :class:`~ssme_envs.envs.tracking_env.EpisodeOverError`
+      and steps none: the scalar env raises it after ``terminated`` or ``truncated``, and
+      ``SyncVectorEnv`` refuses the step with an ``AssertionError`` (a base of that error).
+
+    ``reset(seed=..., options=...)``: ``seed`` an int (sub-env ``i`` gets ``seed + i``), a list
+    of ``num_envs`` ints or Nones, or None. ``options`` None, ``{}`` or ``{"reset_mask": mask}``
+    (a bool array of shape ``(num_envs,)`` with at least one True): only the masked sub-envs
+    reset (with their entries of ``seed``), the others keep their episodes and their last
+    observations. Any other option raises ValueError (TypeError for a mask or ``options`` of
+    the wrong type), as the scalar env does.
+
+    A sub-env whose step went non-finite (the nozzle and launcher tasks' ``nonfinite_reward``)
+    ends its episode as the scalar env does: terminated, finite reward and observation, and
+    ``infos["nonfinite"]`` / ``infos["_nonfinite"]`` (inside ``infos["final_info"]`` in SAME_STEP
+    mode), the layout ``SyncVectorEnv`` gathers from the scalar envs' ``{"nonfinite": True}``.
+
+    ``np_random`` and ``np_random_seed`` are tuples over the sub-envs, as ``SyncVectorEnv``'s;
+    :meth:`sub_env` gives one sub-env's view (its attributes and partial reset), which the SB3
+    adapter uses for ``get_attr``, ``set_attr`` and ``env_method``.
     """
 
     metadata = {"render_modes": [], "autoreset_mode": AutoresetMode.NEXT_STEP}
@@ -53,9 +87,12 @@ class TrackingVectorEnv(VectorEnv):
             raise ValueError(f"max_episode_steps must be a positive integer, got {max_episode_steps!r}")
         if render_mode is not None:
             raise ValueError("the native vector env does not render; render a single env instead")
-        mode = AutoresetMode(autoreset_mode)
-        if mode not in (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP):
-            raise ValueError(f"autoreset_mode must be NEXT_STEP or SAME_STEP, got {autoreset_mode!r}")
+        try:
+            mode = AutoresetMode(autoreset_mode)
+        except ValueError:
+            raise ValueError(
+                f"autoreset_mode must be one of {[m.value for m in AutoresetMode]}, got {autoreset_mode!r}"
+            ) from None
         self.task = self.build_task(**options)
         # Episodes are drawn at the task's full length, as the scalar env draws them, whatever
         # the time limit, so that both consume their generators alike.
@@ -69,7 +106,12 @@ class TrackingVectorEnv(VectorEnv):
         self.observation_space = batch_space(self.single_observation_space, num_envs)
         self._low, self._high = self.single_observation_space.low, self.single_observation_space.high
         n, length, channels = num_envs, self.task.horizon + 1, self.task.n_channels
-        self._rngs: list[np.random.Generator] = [seeding.np_random(None)[0] for _ in range(n)]
+        self._rngs: list[np.random.Generator] = []
+        self._seeds: list[int] = []  # np_random_seed of each sub-env (-1: generator set directly)
+        for _ in range(n):
+            rng, seed = seeding.np_random(None)
+            self._rngs.append(rng)
+            self._seeds.append(seed)
         # Episode data with the env axis last: one step's values of every env are contiguous.
         # References common to every episode (the throttle profile) are not stored per env.
         shared = self.task.shared_references
@@ -83,7 +125,39 @@ class TrackingVectorEnv(VectorEnv):
         self._synced = True  # every env at the same step: reads are slices, not gathers
         self._rows = np.arange(n)
         self._state = self.task.zero_state(n)
-        self._autoreset = np.zeros(n, dtype=bool)
+        # NEXT_STEP: restart at the next step; DISABLED: the episode is over until a reset
+        self._autoreset = np.full(n, mode == AutoresetMode.DISABLED)
+        self._obs = np.zeros((n, *self.single_observation_space.shape), dtype=np.float32)  # last returned
+        self._unstarted = np.ones(n, dtype=bool)  # sub-envs never reset
+        self._started = False  # every sub-env reset at least once
+
+    @property
+    def np_random(self) -> tuple[np.random.Generator, ...]:
+        """The generators of the sub-envs (a tuple, as ``SyncVectorEnv``'s)."""
+        return tuple(self._rngs)
+
+    @property
+    def np_random_seed(self) -> tuple[int, ...]:
+        """The seeds of the sub-envs' generators (a tuple, as ``SyncVectorEnv``'s)."""
+        return tuple(self._seeds)
+
+    def sub_env(self, index: int) -> SubEnv:
+        """The view of sub-env ``index`` (negative counts from the end): see :class:`SubEnv`."""
+        i = operator.index(index)
+        if not -self.num_envs <= i < self.num_envs:
+            raise IndexError(f"sub-env index {index} out of range for {self.num_envs} sub-envs")
+        return SubEnv(self, i % self.num_envs)
+
+    def single_spec(self) -> gym.envs.registration.EnvSpec | None:
+        """The spec that makes one sub-env with ``gymnasium.make`` (None if this env has no
+        spec): this env's spec without the vector arguments, its time limit as
+        ``max_episode_steps``."""
+        if self.spec is None:
+            return None
+        spec = copy.deepcopy(self.spec)  # nothing shared with this env's spec
+        kwargs = {k: v for k, v in spec.kwargs.items() if k not in VECTOR_KWARGS}
+        limit = kwargs.pop("max_episode_steps", spec.max_episode_steps)
+        return dataclasses.replace(spec, kwargs=kwargs, max_episode_steps=limit)
 
     def _restart(self, envs: np.ndarray) -> np.ndarray:
         """Zero the state of the given envs and draw their next episodes; their first observations."""
@@ -109,24 +183,65 @@ class TrackingVectorEnv(VectorEnv):
         obs = task.initial_observation(refs[:, 0], noise[:, 0]).T
         return np.clip(obs, self._low, self._high)
 
-    def reset(self, *, seed: int | list[int | None] | None = None, options: dict | None = None):
-        if isinstance(seed, int):
-            seed = [seed + i for i in range(self.num_envs)]
-        elif seed is None:
+    def reset(
+        self, *, seed: int | Sequence[int | None] | None = None, options: Mapping[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
+        """Start new episodes in every sub-env, or only in those of ``options["reset_mask"]``
+        (see the class docs); the observations of every sub-env and ``{}``."""
+        mask = self._reset_mask(options)
+        if seed is None:
             seed = [None] * self.num_envs
+        elif isinstance(seed, int):
+            seed = [seed + i for i in range(self.num_envs)]
         if len(seed) != self.num_envs:
             raise ValueError(f"seed must be an int or {self.num_envs} seeds, got {len(seed)}")
-        for i, s in enumerate(seed):
-            if s is not None:
-                self._rngs[i] = seeding.np_random(s)[0]
-        self._autoreset[:] = False
-        return self._restart(self._rows), {}
+        envs = self._rows if mask is None or mask.all() else np.flatnonzero(mask)
+        for i in envs:
+            if seed[i] is not None:
+                self._rngs[i], self._seeds[i] = seeding.np_random(seed[i])
+        self._autoreset[envs] = False
+        self._obs[envs] = self._restart(envs)
+        self._unstarted[envs] = False
+        self._started = not self._unstarted.any()
+        return self._obs.copy(), {}
 
-    def step(self, actions: np.ndarray):
+    def _reset_mask(self, options: Any) -> np.ndarray | None:
+        """The checked ``reset_mask`` of the reset options, or None (every sub-env); the errors
+        of ``SyncVectorEnv`` for a bad mask, and the scalar env's for other options."""
+        options = check_reset_options(options, RESET_OPTIONS, type(self).__name__)
+        if "reset_mask" not in options:
+            return None
+        mask = options["reset_mask"]
+        if not isinstance(mask, np.ndarray):
+            raise TypeError(f"options['reset_mask'] must be a numpy array, got {type(mask).__name__}")
+        if mask.shape != (self.num_envs,):
+            raise ValueError(f"options['reset_mask'] must have shape ({self.num_envs},), got {mask.shape}")
+        if mask.dtype != np.bool_:
+            raise TypeError(f"options['reset_mask'] must have dtype bool, got {mask.dtype}")
+        if not mask.any():
+            raise ValueError("options['reset_mask'] must have at least one True entry")
+        return mask
+
+    def step(
+        self, actions: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        """One step of every sub-env; (observations, rewards, terminated, truncated, infos)."""
         acts = np.asarray(actions, dtype=np.float64)
         shape = (self.num_envs, self.task.n_actions)
         if acts.shape != shape:
             raise ValueError(f"actions must have shape {shape}, got {acts.shape}")
+        mode = self.metadata["autoreset_mode"]
+        if not self._started:
+            raise EpisodeOverError(
+                f"sub-env(s) {np.flatnonzero(self._unstarted).tolist()} never reset: "
+                "call reset() before step()"
+            )
+        if mode == AutoresetMode.DISABLED and self._autoreset.any():
+            raise EpisodeOverError(
+                f"the episodes of sub-env(s) {np.flatnonzero(self._autoreset).tolist()} are over and "
+                "autoreset_mode is DISABLED: reset them with reset(options={'reset_mask': mask}) "
+                "before step()"
+            )
         if not math.isfinite(acts.sum()):  # one reduction; the element search only on failure
             bad = np.argwhere(~np.isfinite(acts))
             if bad.size:
@@ -156,8 +271,10 @@ class TrackingVectorEnv(VectorEnv):
         np.maximum(obs, self._low, out=obs)  # into the observation bounds, as the scalar envs do
         np.minimum(obs, self._high, out=obs)
         truncated = t >= self._limit
+        # one reduction; the sub-envs whose step went NaN or infinite only on failure
+        step_infos = {} if math.isfinite(reward.sum()) else self._end_nonfinite(obs, reward, terminated, t)
         infos: dict[str, Any] = {}
-        if self.metadata["autoreset_mode"] == AutoresetMode.NEXT_STEP:
+        if mode == AutoresetMode.NEXT_STEP:
             if self._autoreset.any():
                 restart = np.flatnonzero(self._autoreset)
                 obs[restart] = self._restart(restart)
@@ -165,6 +282,10 @@ class TrackingVectorEnv(VectorEnv):
                 terminated[restart] = False
                 truncated[restart] = False
             self._autoreset = terminated | truncated
+            infos = step_infos
+        elif mode == AutoresetMode.DISABLED:
+            self._autoreset = terminated | truncated
+            infos = step_infos
         else:
             mask = terminated | truncated
             if mask.any():
@@ -174,13 +295,141 @@ class TrackingVectorEnv(VectorEnv):
                 infos = {
                     "final_obs": np.empty(self.num_envs, dtype=object),
                     "_final_obs": mask,
-                    "final_info": {},
+                    "final_info": step_infos,
                     "_final_info": mask.copy(),
                 }
                 for i in done:
                     infos["final_obs"][i] = obs[i].copy()
                 obs[done] = self._restart(done)
+        # what a partial reset returns for the sub-envs it leaves alone; a copy in the layout of
+        # obs (the engine's is column-major), as a transposing copy costs several % of a step
+        self._obs = obs.copy(order="K")
         return obs, reward, terminated, truncated, infos
+
+    def _end_nonfinite(
+        self, obs: np.ndarray, reward: np.ndarray, terminated: np.ndarray, t: np.ndarray
+    ) -> dict[str, Any]:
+        """End, in place, the episodes whose step's reward came out NaN or infinite (the plant's
+        state overflowed), as the scalar env does (``NozzleTVCEnv``'s Episode End): terminated,
+        the task's ``nonfinite_reward``, NaN observation entries 0. Returns their step infos
+        ``{"nonfinite": True}`` as ``SyncVectorEnv`` gathers them (``{}`` if none). Sub-envs that
+        restart at this step (NEXT_STEP) are left alone: their step is discarded. Tasks without
+        ``nonfinite_reward`` (the engines, whose unstable plants are refused) pass values on."""
+        bad = ~np.isfinite(reward) & ~self._autoreset
+        if not bad.any() or not hasattr(self.task, "nonfinite_reward"):
+            return {}
+        rows = np.flatnonzero(bad)
+        reward[rows] = self.task.nonfinite_reward(t[rows])
+        terminated[rows] = True
+        obs[rows] = np.nan_to_num(obs[rows], nan=0.0)
+        return {"nonfinite": bad.copy(), "_nonfinite": bad}
+
+
+class SubEnv:
+    """Sub-env ``index`` of a :class:`TrackingVectorEnv`: a view of what one sub-env has alone.
+
+    A native vector env holds no sub-env objects, only per-sub-env entries of its arrays; this
+    view presents them as the attributes of the scalar env:
+
+    - per sub-env: ``np_random`` (settable: its generator; ``np_random_seed`` becomes -1, as in
+      gymnasium), ``np_random_seed``, ``elapsed_steps`` (steps in the current episode), and
+      ``reset(seed=None, options=None)``: a partial reset of this sub-env alone, returning its
+      observation and info (options as the scalar env's: none);
+    - shared by every sub-env, read-only: ``task``, ``action_space`` and ``observation_space``
+      (the single spaces), ``render_mode``, ``spec`` (a fresh copy of the spec that makes one
+      sub-env, see :meth:`TrackingVectorEnv.single_spec`);
+    - ``get_wrapper_attr``, ``has_wrapper_attr``, ``set_wrapper_attr``, as on a gymnasium env.
+
+    Nothing else exists per sub-env: ``step``, ``close``, ``render`` and other names raise
+    AttributeError (a sub-env steps with its batch), as does setting anything but ``np_random``.
+    """
+
+    __slots__ = ("_index", "_venv")
+    _names = (
+        "np_random", "np_random_seed", "elapsed_steps", "reset", "task", "action_space",
+        "observation_space", "render_mode", "spec", "get_wrapper_attr", "has_wrapper_attr",
+        "set_wrapper_attr",
+    )  # fmt: skip
+
+    def __init__(self, venv: TrackingVectorEnv, index: int) -> None:
+        object.__setattr__(self, "_venv", venv)
+        object.__setattr__(self, "_index", index)
+
+    def __repr__(self) -> str:
+        return f"SubEnv({type(self._venv).__name__}, index={self._index})"
+
+    def __getattr__(self, name: str) -> Any:
+        raise AttributeError(
+            f"{name!r} does not exist per sub-env of the native {type(self._venv).__name__} (a sub-env "
+            f"steps, renders and closes with its batch); a sub-env has {', '.join(self._names)}"
+        )
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        if name != "np_random":
+            raise AttributeError(
+                f"cannot set {name!r} on one sub-env of the native {type(self._venv).__name__}: "
+                "only np_random is per sub-env and settable"
+            )
+        object.__setattr__(self, name, value)
+
+    @property
+    def np_random(self) -> np.random.Generator:
+        return self._venv._rngs[self._index]
+
+    @np_random.setter
+    def np_random(self, value: np.random.Generator) -> None:
+        self._venv._rngs[self._index] = value
+        self._venv._seeds[self._index] = -1
+
+    @property
+    def np_random_seed(self) -> int:
+        return self._venv._seeds[self._index]
+
+    @property
+    def elapsed_steps(self) -> int:
+        return int(self._venv._t[self._index])
+
+    @property
+    def task(self) -> Any:
+        return self._venv.task
+
+    @property
+    def action_space(self) -> gym.spaces.Box:
+        return self._venv.single_action_space
+
+    @property
+    def observation_space(self) -> gym.spaces.Box:
+        return self._venv.single_observation_space
+
+    @property
+    def render_mode(self) -> None:
+        return self._venv.render_mode
+
+    @property
+    def spec(self) -> gym.envs.registration.EnvSpec | None:
+        return self._venv.single_spec()
+
+    def reset(
+        self, *, seed: int | None = None, options: Mapping[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
+        """Start a new episode in this sub-env only; its first observation and info."""
+        venv = self._venv
+        options = check_reset_options(options, {}, f"sub-env of {type(venv).__name__}")
+        seeds: list[int | None] = [None] * venv.num_envs
+        seeds[self._index] = seed
+        mask = np.zeros(venv.num_envs, dtype=bool)
+        mask[self._index] = True
+        obs, _ = venv.reset(seed=seeds, options={**options, "reset_mask": mask})
+        return obs[self._index], {}
+
+    def get_wrapper_attr(self, name: str) -> Any:
+        return getattr(self, name)
+
+    def has_wrapper_attr(self, name: str) -> bool:
+        return hasattr(self, name)
+
+    def set_wrapper_attr(self, name: str, value: Any, *, force: bool = True) -> None:
+        setattr(self, name, value)
 
 
 def _transpose(table: np.ndarray, out: np.ndarray | None = None, tile: int = 256) -> np.ndarray:

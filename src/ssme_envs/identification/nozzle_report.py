@@ -18,6 +18,7 @@ from ssme_envs.identification.nozzle_pipeline import (
 from ssme_envs.identification.report import agg_pyplot
 from ssme_envs.identification.subspace import to_continuous
 from ssme_envs.models.nozzle import NozzleCore, NozzleParameters, published_nozzle
+from ssme_envs.outputs import save_figure, write_text
 
 # Eq 5 of the paper: G_m(s) = 0.03971 / (s^2 + 14.95 s + 5694), for the frequency-response figure.
 PAPER_TF = ([0.03971], [1.0, 14.95, 5694.0])
@@ -44,7 +45,7 @@ def plot_frequency_response(path: Path, ident: NozzleIdentification) -> None:
         ax.grid(alpha=0.3, which="both")
     fig.suptitle("Frequency response of the linear model")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     plt.close(fig)
 
 
@@ -97,7 +98,7 @@ def plot_hysteresis(
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     plt.close(fig)
 
 
@@ -120,7 +121,7 @@ def plot_prediction(
     ax.set_title(title)
     zoom.set_title("first second")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     plt.close(fig)
     return {label: float(fit_percent(record.beta, pred)) for label, pred in preds.items()}
 
@@ -262,5 +263,5 @@ def write_nozzle_report(
     lines.append("")
     lines += [f"![prediction, {name} (figure 12)](prediction_{name}.png)" for name in records]
     path = out_dir / "report.md"
-    path.write_text("\n".join(lines) + "\n")
+    write_text(path, "\n".join(lines) + "\n")
     return path

@@ -19,6 +19,7 @@ from ssme_envs.identification.metrics import validate
 from ssme_envs.identification.records import read_columns, write_columns
 from ssme_envs.models.engine import ENGINE_DT, POWER_LEVELS, TruthConfig, published_model, simulate
 from ssme_envs.models.statespace import AlphaCanonicalModel
+from ssme_envs.outputs import atomic_write
 from ssme_envs.signals import prbs, step_ramp_test_signal
 
 DEFAULT_INPUTS = ("beta_opov", "beta_fpov")
@@ -56,10 +57,10 @@ def read_record(
 
 
 def write_record(path: str | Path, record: EngineRecord) -> None:
-    """Write a record as CSV with columns t, inputs, outputs."""
-    write_columns(
-        path, record.dt, [*record.input_names, *record.output_names], np.column_stack([record.u, record.y])
-    )
+    """Write a record as CSV with columns t, inputs, outputs (atomically)."""
+    with atomic_write(path) as fh:
+        names = [*record.input_names, *record.output_names]
+        write_columns(fh, record.dt, names, np.column_stack([record.u, record.y]))
 
 
 def identify_record(record: EngineRecord, **options) -> Identification:

@@ -13,6 +13,7 @@ from ssme_envs.identification.alpha_canonical import Identification
 from ssme_envs.identification.metrics import filter_prediction, model_prediction
 from ssme_envs.identification.pipeline import EngineRecord, LevelResult
 from ssme_envs.models.statespace import AlphaCanonicalModel
+from ssme_envs.outputs import save_figure, write_text
 
 
 def agg_pyplot():
@@ -47,7 +48,7 @@ def plot_comparison(path: Path, record: EngineRecord, model: AlphaCanonicalModel
     axes[-1].grid(alpha=0.3)
     fig.suptitle(title)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     plt.close(fig)
 
 
@@ -68,7 +69,7 @@ def plot_structure_search(path: Path, ident: Identification, rank_tol: float) ->
     ax.set_title(f"Structure search: indices {list(search.indices)} (green: kept)")
     ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     plt.close(fig)
 
 
@@ -124,7 +125,7 @@ def plot_response_bands(path: Path, model: AlphaCanonicalModel, title: str) -> N
         f"({len(draws)} of {BAND_DRAWS} drawn models stable)"
     )
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     plt.close(fig)
 
 
@@ -242,7 +243,7 @@ def write_record_report(
         plot_comparison(out_dir / png, rec, model, f"{name}: measured, filter and model")
         lines += [f"![{name}]({png})", ""]
     path = out_dir / "report.md"
-    path.write_text("\n".join(lines))
+    write_text(path, "\n".join(lines))
     return path
 
 
@@ -351,5 +352,5 @@ def write_default_report(out_dir: Path, results: list[LevelResult], seed: int, t
         )
         lines += [f"![{r.power_percent} %]({png})", ""]
     path = out_dir / "report.md"
-    path.write_text("\n".join(lines))
+    write_text(path, "\n".join(lines))
     return path

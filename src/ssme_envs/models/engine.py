@@ -241,6 +241,20 @@ def _column(gain: np.ndarray, j: int) -> np.ndarray:
     return gain[:, j, None] if gain.ndim == 2 else gain[:, j]
 
 
+def check_stable_plant(model: AlphaCanonicalModel) -> None:
+    """Refuse (ValueError) a model with an eigenvalue of A on or outside the unit circle as an
+    env's plant: its open-loop state grows without bound, and a fast enough growth overflows
+    within one step (to an infinite reward and NaN). The SSME models are well inside (spectral
+    radius about 0.55-0.65); an unstable one is a failed identification, not an engine."""
+    radius = model.spectral_radius()
+    if not radius < 1.0:
+        raise ValueError(
+            f"engine plant refused: A has spectral radius {radius:.6g} >= 1 (an eigenvalue on or "
+            "outside the unit circle), so its open-loop state grows without bound; the envs need a "
+            "stable model (the identified SSME models have 0.55-0.65)"
+        )
+
+
 def output_coupling(model: AlphaCanonicalModel) -> np.ndarray | None:
     """H of ``C = H [0 I]``, or None when it is the identity (the outputs are the last states)."""
     h = model.H

@@ -412,7 +412,9 @@ class AlphaCanonicalModel:
         return model
 
     def save(self, path: str | Path) -> None:
-        Path(path).write_text(dumps_compact(self.to_dict()) + "\n")
+        from ssme_envs.outputs import write_text  # atomic: a reader never sees half a model
+
+        write_text(path, dumps_compact(self.to_dict()) + "\n")
 
     @classmethod
     def load(cls, path: str | Path) -> AlphaCanonicalModel:
