@@ -22,13 +22,13 @@ import inspect
 import itertools
 import json
 import math
-import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from ssme_envs.outputs import atomic_write
 
 FORMAT = "ssme-envs/policy"
 VERSION = 1
@@ -56,19 +56,9 @@ _NORMALIZATION_KEYS = {"mean", "var", "count", "clip", "epsilon"}
 
 
 def write_atomic(path: Path, data: bytes | str) -> None:
-    """Write ``data`` to ``path`` through a temporary file in the same directory and
-    ``os.replace``: readers see the old file or the new one, never a part."""
-    path = Path(path)
-    raw = data.encode() if isinstance(data, str) else data
-    fd, temp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as file:
-            file.write(raw)
-        os.chmod(temp, 0o644)  # mkstemp's 0o600 would hide the file from other users
-        os.replace(temp, path)
-    except BaseException:
-        Path(temp).unlink(missing_ok=True)
-        raise
+    """Write ``data`` (text as UTF-8) to ``path`` atomically (:func:`ssme_envs.outputs.atomic_write`)."""
+    with atomic_write(path, "w" if isinstance(data, str) else "wb") as fh:
+        fh.write(data)
 
 
 def algorithm_class(name: str) -> Any:

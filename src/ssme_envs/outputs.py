@@ -77,7 +77,7 @@ def atomic_write(path: str | Path, mode: str = "w") -> Iterator[IO[Any]]:
         os.replace(tmp, path)
     except OSError as exc:
         tmp.unlink(missing_ok=True)
-        if exc.filename is None:  # write, fsync: name the file (a full disk says which one)
+        if exc.filename is None and exc.errno is not None:  # write, fsync: name the file
             raise OSError(exc.errno, exc.strerror, os.fspath(path)) from None
         raise
     except BaseException:
@@ -231,6 +231,21 @@ def _remove_empty(created: list[Path]) -> None:
             return
 
 
+def os_error_text(exc: OSError) -> str:
+    """``path: reason`` of an OSError (both paths of a rename)."""
+    reason = exc.strerror or str(exc) or type(exc).__name__
+    if exc.filename is not None and exc.filename2 is not None:
+        return f"{exc.filename} -> {exc.filename2}: {reason}"
+    if exc.filename is not None:
+        return f"{exc.filename}: {reason}"
+    return reason
+
+
+def holds_run(out: str | Path) -> bool:
+    """Whether ``out`` holds an earlier ssme-envs run (which a new run replaces)."""
+    return (Path(out) / MARKER).is_file()
+
+
 @contextmanager
 def run_directory(out: str | Path, stage: bool = True) -> Iterator[Path]:
     """The directory a command writes into, locked; swapped in for ``out`` when the block ends.
@@ -282,12 +297,26 @@ def run_directory(out: str | Path, stage: bool = True) -> Iterator[Path]:
         raise
 
 
+@contextmanager
+def output_directory(out: str | Path) -> Iterator[Path]:
+    """:func:`run_directory` for a library function: file-system errors inside the block become
+    ValueErrors naming ``out``, not the temporary directory the user never sees."""
+    with run_directory(out) as work:
+        try:
+            yield work
+        except OSError as exc:
+            raise ValueError(os_error_text(exc).replace(str(work), str(out))) from None
+
+
 __all__ = [
     "MARKER",
     "OutputError",
     "atomic_write",
     "check_target",
     "directory_lock",
+    "holds_run",
+    "os_error_text",
+    "output_directory",
     "run_directory",
     "save_figure",
     "write_text",

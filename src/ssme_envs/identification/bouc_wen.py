@@ -31,6 +31,7 @@ The record must start at rest at the zero of the angle (deviations from the rest
 from __future__ import annotations
 
 import multiprocessing
+import signal
 import time
 from dataclasses import dataclass, field
 
@@ -216,6 +217,8 @@ _WORKER: dict[str, _Simulator] = {}
 
 
 def _init_worker(simulator: _Simulator) -> None:
+    # Ctrl-C goes to the whole process group: the parent handles it and ends the pool.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     _WORKER["simulate"] = simulator
 
 
@@ -375,6 +378,10 @@ def fit_bouc_wen(
             x_scale=np.abs([j0, max(abs(b0), 1e-3), k0]),
             max_nfev=40,
         )
+    except BaseException:
+        if pool is not None:
+            pool.terminate()  # do not wait for the running evaluations
+        raise
     finally:
         if pool is not None:
             pool.close()

@@ -45,6 +45,7 @@ from __future__ import annotations
 import contextlib
 import multiprocessing
 import os
+import signal
 import time
 from dataclasses import dataclass
 
@@ -139,17 +140,6 @@ class _Replicate:
         except ValueError:
             return None
         return np.array([params[name] for name in PARAMETERS])
-
-
-_WORKER: dict[str, _Replicate] = {}
-
-
-def _init_worker(replicate: _Replicate) -> None:
-    _WORKER["run"] = replicate
-
-
-def _run_worker(seed: np.random.SeedSequence) -> np.ndarray | None:
-    return _WORKER["run"](seed)
 
 
 @contextlib.contextmanager
@@ -254,12 +244,19 @@ def dsr_e_uncertainty(
     replicate = _Replicate(u, clean, residual, noise_filter, dt, (result.order, past, result.future_horizon))
     seeds = np.random.SeedSequence(seed).spawn(replicates)
     if workers > 1:
-        with _single_threaded_blas():  # the spawned workers read it when they load numpy
+        # The spawned workers read the BLAS setting when they load numpy. Their first act is to
+        # ignore SIGINT (a Ctrl-C reaches the whole process group; the parent handles it and
+        # ends the pool): the initializer is signal.signal itself, so nothing heavy is imported
+        # before it, and the replicate travels with the tasks.
+        with _single_threaded_blas():
             pool = multiprocessing.get_context("spawn").Pool(
-                min(workers, replicates), initializer=_init_worker, initargs=(replicate,)
+                min(workers, replicates), initializer=signal.signal, initargs=(signal.SIGINT, signal.SIG_IGN)
             )
         try:
-            runs = pool.map(_run_worker, seeds)
+            runs = pool.map(replicate, seeds)
+        except BaseException:
+            pool.terminate()  # do not wait for the remaining replicates
+            raise
         finally:
             pool.close()
             pool.join()
