@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any, Protocol, runtime_checkable
+from typing import Any, Protocol, TypeVar, runtime_checkable
 
 import numpy as np
 
 from ssme_envs.envs.nozzle_tvc import DEG  # degrees per radian, re-exported for the controllers
+
+T = TypeVar("T")
 
 
 @runtime_checkable
@@ -35,21 +38,30 @@ def task_of(env: Any) -> Any:
     raise TypeError(f"{type(env).__name__} is not an ssme-envs environment (it has no task)")
 
 
+def by_kind(table: Mapping[type, T], obj: Any, what: str) -> T:
+    """The entry of ``table`` for the most specific class of ``obj`` that it holds (along the
+    method resolution order), so that a subclass's own entry wins whatever the table's order;
+    TypeError when none."""
+    for kind in type(obj).__mro__:
+        if kind in table:
+            return table[kind]
+    raise TypeError(f"no {what} for {type(obj).__name__}")
+
+
 def env_id_of(env: Any) -> str:
     """The registered id of an ssme-envs env, from the kind of its task."""
     from ssme_envs.envs.engine_throttle import ThrottleTask
+    from ssme_envs.envs.engine_tracking import EngineTask
     from ssme_envs.envs.launcher_pitch import LauncherTask
     from ssme_envs.envs.nozzle_tvc import NozzleTask
 
-    task = task_of(env)
-    for kind, name in (
-        (ThrottleTask, "EngineThrottle"),
-        (LauncherTask, "LauncherPitch"),
-        (NozzleTask, "NozzleTVC"),
-    ):
-        if isinstance(task, kind):
-            return f"ssme_envs/{name}-v0"
-    return "ssme_envs/EngineTracking-v0"
+    names = {
+        EngineTask: "EngineTracking",
+        ThrottleTask: "EngineThrottle",
+        NozzleTask: "NozzleTVC",
+        LauncherTask: "LauncherPitch",
+    }
+    return f"ssme_envs/{by_kind(names, task_of(env), 'env id')}-v0"
 
 
 @dataclass(frozen=True)
@@ -120,4 +132,4 @@ class BatchController:
         raise NotImplementedError
 
 
-__all__ = ["DEG", "BatchController", "Controller", "Ports", "env_id_of", "task_of"]
+__all__ = ["DEG", "BatchController", "Controller", "Ports", "by_kind", "env_id_of", "task_of"]

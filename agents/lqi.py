@@ -33,15 +33,14 @@ import scipy.linalg
 
 from agents.base import BatchController
 from agents.plants import LinearDesign, linear_design
+from ssme_envs.models.linear import PlantMatrices, StateSpace
 
 
 @dataclass(frozen=True)
-class ServoDesign:
+class ServoDesign(PlantMatrices):
     """Gains of the LQ servo on one design model (all arrays 2-D, model units)."""
 
-    A: np.ndarray
-    B: np.ndarray
-    C: np.ndarray
+    plant: StateSpace  # the design model the gains are for
     gain: np.ndarray  # (m, n + m + p): du = -gain @ (z - z_target)
     kalman: np.ndarray  # (n, p): x_hat = x_pred + kalman (y - C x_pred)
     target: np.ndarray  # (n + m, p): [x_ss; u_ss] = target @ r
@@ -105,7 +104,7 @@ def design_servo(
     ramp_change = target[n:]
     if not design.follow_ramps:
         ramp, ramp_change = np.zeros_like(ramp), np.zeros_like(ramp_change)
-    return ServoDesign(a, b, c, gain, kalman, target, ramp, ramp_change, p_z, a_z, b_z, q_z, r)
+    return ServoDesign(design.plant, gain, kalman, target, ramp, ramp_change, p_z, a_z, b_z, q_z, r)
 
 
 class LQIServo(BatchController):

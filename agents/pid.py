@@ -76,7 +76,7 @@ class PlacedPID(BatchController):
     def __init__(self, env: Any, design: str = "identified", omega: float | None = None) -> None:
         super().__init__()
         task = task_of(env)
-        if not isinstance(task, NozzleTask):
+        if not isinstance(task, NozzleTask | LauncherTask):  # the launcher composes a nozzle task
             raise TypeError(f"{self.name} is for NozzleTVC and LauncherPitch, not {type(task).__name__}")
         if omega is None:
             omega = 4.0 if isinstance(task, LauncherTask) else 60.0

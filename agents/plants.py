@@ -1,36 +1,40 @@
-"""The linear design model of each env, with the units that map it onto the env's interface."""
+"""The linear design model of each env, with the units that map it onto the env's interface.
+
+Each kind of task has its design model in :data:`DESIGNS`, looked up along the task's class
+hierarchy (:func:`agents.base.by_kind`): the launcher's task is a nozzle task and the throttle
+task an engine task, and each still gets its own entry whatever the order of the table.
+"""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 import scipy.signal
 
-from agents.base import DEG, Ports, task_of
+from agents.base import DEG, Ports, by_kind, task_of
 from ssme_envs.envs.engine_throttle import ThrottleTask
 from ssme_envs.envs.engine_tracking import EngineTask
 from ssme_envs.envs.engine_tracking import design_model as engine_design_model
 from ssme_envs.envs.launcher_pitch import LauncherTask
 from ssme_envs.envs.nozzle_tvc import NozzleTask
+from ssme_envs.models.linear import PlantMatrices, StateSpace
 from ssme_envs.models.nozzle import NozzleParameters, identified_nozzle
 
 DESIGN_SOURCES = ("identified", "truth")
 
 
 @dataclass(frozen=True)
-class LinearDesign:
+class LinearDesign(PlantMatrices):
     """A discrete linear plant ``x+ = A x + B u``, ``y = C x`` to design on, in model units.
 
     ``error_weight`` and ``rate_weight`` express the env's reward in model units: the cost of a
     step is ``error_weight |r - y|^2 + rate_weight |u_k - u_(k-1)|^2``.
     """
 
-    A: np.ndarray
-    B: np.ndarray
-    C: np.ndarray
-    dt: float  # s
+    plant: StateSpace
     ports: Ports
     input_limit: float  # |u| reachable with actions in [-1, 1], model units
     noise_std: np.ndarray  # (p,), measurement noise, model units
@@ -53,21 +57,77 @@ def nozzle_joint(task: NozzleTask, source: str) -> NozzleParameters:
     return identified_nozzle().plant() if check_source(source) == "identified" else task.plant
 
 
-def _continuous(a: np.ndarray, b: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
-    c = np.zeros((1, a.shape[0]))
-    c[0, 0] = 1.0
+def _oscillator(a1: float, a0: float, g: float, dt: float) -> StateSpace:
+    """``x'' + a1 x' + a0 x = g u`` held over each sample (zero-order hold), output x."""
+    a, b = np.array([[0.0, 1.0], [-a0, -a1]]), np.array([[0.0], [g]])
+    c = np.array([[1.0, 0.0]])
     ad, bd, *_ = scipy.signal.cont2discrete((a, b, c, np.zeros((1, 1))), dt, method="zoh")
-    return ad, bd
+    return StateSpace(ad, bd, c, dt)
+
+
+def _nozzle_second_order(task: NozzleTask, source: str) -> tuple[float, float, float]:
+    joint = nozzle_joint(task, source)
+    return joint.b / joint.J, joint.small_signal_stiffness / joint.J, 1.0 / joint.J
+
+
+def _launcher_second_order(task: LauncherTask, source: str) -> tuple[float, float, float]:
+    return 0.0, -task.instability, task.effectiveness
+
+
+SECOND_ORDER: dict[type, Callable[[Any, str], tuple[float, float, float]]] = {
+    NozzleTask: _nozzle_second_order,
+    LauncherTask: _launcher_second_order,
+}
 
 
 def second_order(task: NozzleTask, source: str) -> tuple[float, float, float]:
     """(a1, a0, g) of the second-order design model ``x'' + a1 x' + a0 x = g u``: the nozzle
     (torque -> angle, the joint's small-signal stiffness) or the launcher's rigid body (deflection
     -> attitude, the servoed nozzle taken as ideal: its 15 Hz are far above the attitude loop's)."""
-    if isinstance(task, LauncherTask):
-        return 0.0, -task.instability, task.effectiveness
-    joint = nozzle_joint(task, source)
-    return joint.b / joint.J, joint.small_signal_stiffness / joint.J, 1.0 / joint.J
+    return by_kind(SECOND_ORDER, task, "second-order model")(task, source)
+
+
+def _nozzle_design(task: NozzleTask, source: str, power: float | None) -> LinearDesign:
+    return LinearDesign(
+        _oscillator(*second_order(task, source), task.dt), Ports((0,), (2,), DEG, task.torque_limit),
+        task.torque_limit, np.array([task.noise_std]), task.error_weight * DEG**2,
+        task.rate_weight / task.torque_limit**2,
+    )  # fmt: skip
+
+
+def _launcher_design(task: LauncherTask, source: str, power: float | None) -> LinearDesign:
+    return LinearDesign(
+        _oscillator(*second_order(task, source), task.dt), Ports((0,), (2,), DEG, task.max_deflection),
+        task.max_deflection, np.array([task.noise_std]), task.error_weight * DEG**2,
+        task.rate_weight / task.max_deflection**2,
+        # through the 15 Hz servo the ramp feedforward costs: attitude cost 2.17 -> 3.62
+        follow_ramps=False,
+    )  # fmt: skip
+
+
+def _engine_plant(model: Any, task: EngineTask, ports: Ports) -> LinearDesign:
+    return LinearDesign(
+        StateSpace(model.A, model.B, model.C, model.dt), ports, task.action_scale, task.noise_std.copy(),
+        task.error_weight * 100.0**2, task.rate_weight / task.action_scale**2,
+    )  # fmt: skip
+
+
+def _engine_design(task: EngineTask, source: str, power: float | None) -> LinearDesign:
+    return _engine_plant(task.design_model(source), task, Ports((0, 1), (2, 3), 100.0, task.action_scale))
+
+
+def _throttle_design(task: ThrottleTask, source: str, power: float | None) -> LinearDesign:
+    model = engine_design_model(100.0 if power is None else float(power), source)
+    # throttle observations: y - y_eq(P) is minus the error, and the reference is 0
+    return _engine_plant(model, task, Ports((4, 5), (), -100.0, task.action_scale))
+
+
+DESIGNS: dict[type, Callable[[Any, str, float | None], LinearDesign]] = {
+    NozzleTask: _nozzle_design,
+    LauncherTask: _launcher_design,
+    EngineTask: _engine_design,
+    ThrottleTask: _throttle_design,
+}
 
 
 def linear_design(env: Any, source: str = "identified", power: float | None = None) -> LinearDesign:
@@ -76,36 +136,16 @@ def linear_design(env: Any, source: str = "identified", power: float | None = No
     its nonlinear effects left out). ``power`` (%): the throttle env's model at that level."""
     task = task_of(env)
     check_source(source)
-    if isinstance(task, NozzleTask):
-        a1, a0, g = second_order(task, source)
-        ad, bd = _continuous(np.array([[0.0, 1.0], [-a0, -a1]]), np.array([[0.0], [g]]), task.dt)
-    if isinstance(task, LauncherTask):
-        return LinearDesign(
-            ad, bd, np.array([[1.0, 0.0]]), task.dt, Ports((0,), (2,), DEG, task.max_deflection),
-            task.max_deflection, np.array([task.noise_std]), task.error_weight * DEG**2,
-            task.rate_weight / task.max_deflection**2,
-            # through the 15 Hz servo the ramp feedforward costs: attitude cost 2.17 -> 3.62
-            follow_ramps=False,
-        )  # fmt: skip
-    if isinstance(task, NozzleTask):
-        return LinearDesign(
-            ad, bd, np.array([[1.0, 0.0]]), task.dt, Ports((0,), (2,), DEG, task.torque_limit),
-            task.torque_limit, np.array([task.noise_std]), task.error_weight * DEG**2,
-            task.rate_weight / task.torque_limit**2,
-        )  # fmt: skip
-    if isinstance(task, EngineTask):
-        if isinstance(task, ThrottleTask):
-            model = engine_design_model(100.0 if power is None else float(power), source)
-            # throttle observations: y - y_eq(P) is minus the error, and the reference is 0
-            ports = Ports((4, 5), (), -100.0, task.action_scale)
-        else:
-            model = task.design_model(source)
-            ports = Ports((0, 1), (2, 3), 100.0, task.action_scale)
-        return LinearDesign(
-            model.A, model.B, model.C, model.dt, ports, task.action_scale, task.noise_std.copy(),
-            task.error_weight * 100.0**2, task.rate_weight / task.action_scale**2,
-        )  # fmt: skip
-    raise TypeError(f"no design model for {type(task).__name__}")
+    return by_kind(DESIGNS, task, "design model")(task, source, power)
 
 
-__all__ = ["DESIGN_SOURCES", "LinearDesign", "check_source", "linear_design", "nozzle_joint", "second_order"]
+__all__ = [
+    "DESIGNS",
+    "DESIGN_SOURCES",
+    "SECOND_ORDER",
+    "LinearDesign",
+    "check_source",
+    "linear_design",
+    "nozzle_joint",
+    "second_order",
+]

@@ -26,9 +26,9 @@ from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
 import ssme_envs  # noqa: F401
-from ssme_envs.envs import nozzle_tvc
+from ssme_envs.envs import nozzle_task
 from ssme_envs.envs.launcher_pitch import LauncherTask
-from ssme_envs.envs.nozzle_tvc import NozzleTask
+from ssme_envs.envs.nozzle_task import NozzleTask
 from ssme_envs.envs.tracking_env import EpisodeOverError
 from ssme_envs.models.engine import identified_model
 from ssme_envs.models.nozzle import (
@@ -211,7 +211,7 @@ def test_a_damping_limited_plant_that_diverged_now_runs_finite():
     substeps, where h b/J = 7.9 is beyond RK4's real-axis limit and the motion diverges; the
     stability rule takes 2316 and the env runs finite."""
     plant = NozzleParameters.linear(1e-3, 376.53, 1.43e5)
-    old = recommended_substeps(plant, 0.008, ENVELOPE, nozzle_tvc.ENV_STEP_RATE)
+    old = recommended_substeps(plant, 0.008, ENVELOPE, nozzle_task.ENV_STEP_RATE)
     assert 0.008 / old * plant.b / plant.J > RK4_REAL_AXIS_LIMIT
     with np.errstate(all="ignore"):
         diverged = simulate_nozzle(plant, np.full(20, 1e-3), substeps=old)
@@ -294,7 +294,7 @@ def test_explicit_substeps_below_the_stability_bound_are_refused():
 def _poisoned(monkeypatch: pytest.MonkeyPatch, threshold: float) -> None:
     """Make the env integrators return NaN wherever |torque| > threshold (a deterministic
     function of the torque, so the scalar and the batched envs poison the same steps)."""
-    real_floats, real_arrays = nozzle_tvc.rk4_floats, nozzle_tvc.rk4_arrays
+    real_floats, real_arrays = nozzle_task.rk4_floats, nozzle_task.rk4_arrays
 
     def floats(x, v, w, tau, h, steps, p):
         out = real_floats(x, v, w, tau, h, steps, p)
@@ -304,8 +304,8 @@ def _poisoned(monkeypatch: pytest.MonkeyPatch, threshold: float) -> None:
         real_arrays(state, tau, h, steps, p)
         state[:, np.abs(np.broadcast_to(tau, state.shape[1:])) > threshold] = np.nan
 
-    monkeypatch.setattr(nozzle_tvc, "rk4_floats", floats)
-    monkeypatch.setattr(nozzle_tvc, "rk4_arrays", arrays)
+    monkeypatch.setattr(nozzle_task, "rk4_floats", floats)
+    monkeypatch.setattr(nozzle_task, "rk4_arrays", arrays)
 
 
 @pytest.mark.parametrize(("env_id", "threshold"), [(NOZZLE, 0.9 * TORQUE), (LAUNCHER, 6.0e3)])

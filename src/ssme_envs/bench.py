@@ -5,39 +5,50 @@ its native vector env at several sizes, with Pendulum-v1 (single) and CartPole-v
 env measured alongside. Machines are shared and noisy, so the two are timed in alternating
 rounds and each rate is the best round's (as ``timeit`` does); the ratios are what to compare.
 A round is one whole episode of the measured env (its registered step limit), so the vector
-rates include the resets of every episode. Every env, the references included, is stepped with
-the zero action: our episodes then run to their time limit, so the rates time steps, not the
-resets of episodes cut short (a constant random torque drives the nozzle out of its envelope
-within a few steps; what terminations cost depends on the policy).
+rates include the resets of every episode. Each env, the references included, is stepped with
+the zero action (our episodes then run to their time limit: the rates time steps) and with
+uniform random actions (episodes end early and often: the rates include their resets).
+
+Each native vector row also gives its floor: the plant's arithmetic alone (the plant core of
+``models`` on N envs, without references, noise, rewards or observations), timed on its own.
 """
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable, Sequence
 
 import gymnasium as gym
 import numpy as np
 
-ENV_IDS = (
-    "ssme_envs/EngineTracking-v0",
-    "ssme_envs/EngineThrottle-v0",
-    "ssme_envs/NozzleTVC-v0",
-    "ssme_envs/LauncherPitch-v0",
-)
+from ssme_envs.envs import catalogue
+
+ENV_IDS = tuple(catalogue.ENVS)
 VECTOR_SIZES = (1, 64, 1024, 4096)
 SINGLE_ROUND_STEPS = 2000
 
 
-def _single_stepper(env_id: str) -> tuple[Callable[[int], float], Callable[[], None]]:
+ACTIONS = ("zero", "random")
+_TABLE = 256  # random actions drawn beforehand and cycled: the draws are not the env's time
+
+
+def _action_table(space: gym.spaces.Space, kind: str) -> np.ndarray:
+    if kind == "zero":
+        return np.zeros((1, *space.shape), dtype=space.dtype)
+    space.seed(0)
+    return np.stack([space.sample() for _ in range(_TABLE)])
+
+
+def _single_stepper(env_id: str, kind: str = "zero") -> tuple[Callable[[int], float], Callable[[], None]]:
     env = gym.make(env_id)
     env.reset(seed=0)
-    action = np.zeros(env.action_space.shape, dtype=env.action_space.dtype)
+    table = list(_action_table(env.action_space, kind))
 
     def run(steps: int) -> float:
         start = time.perf_counter()
-        for _ in range(steps):
-            _, _, terminated, truncated, _ = env.step(action)
+        for k in range(steps):
+            _, _, terminated, truncated, _ = env.step(table[k % len(table)])
             if terminated or truncated:
                 env.reset()
         return time.perf_counter() - start
@@ -45,15 +56,17 @@ def _single_stepper(env_id: str) -> tuple[Callable[[int], float], Callable[[], N
     return run, env.close
 
 
-def _vector_stepper(env_id: str, num_envs: int) -> tuple[Callable[[int], float], Callable[[], None]]:
+def _vector_stepper(
+    env_id: str, num_envs: int, kind: str = "zero"
+) -> tuple[Callable[[int], float], Callable[[], None]]:
     env = gym.make_vec(env_id, num_envs=num_envs, vectorization_mode="vector_entry_point")
     env.reset(seed=0)
-    actions = np.zeros(env.action_space.shape, dtype=env.action_space.dtype)
+    table = list(_action_table(env.action_space, kind)[:16])
 
     def run(steps: int) -> float:
         start = time.perf_counter()
-        for _ in range(steps):
-            env.step(actions)
+        for k in range(steps):
+            env.step(table[k % len(table)])
         return time.perf_counter() - start
 
     return run, env.close
@@ -70,13 +83,61 @@ def _race(ours: tuple, reference: tuple, steps: int, rounds: int) -> tuple[float
     return best[1], best[0]
 
 
+def plant_floor(env_id: str, num_envs: int, steps: int = 50, rounds: int = 5) -> float:
+    """Best seconds per step of the env's plant arithmetic alone on ``num_envs`` envs: the
+    plant core the task steps (engine valves and dynamics; the nozzle's RK4 substeps; the
+    launcher's servo samples of RK4 and body), at the zero command."""
+    from ssme_envs.envs.engine_task import EngineTask
+    from ssme_envs.envs.launcher_pitch import LauncherTask
+    from ssme_envs.envs.nozzle_task import integrate
+    from ssme_envs.envs.task import SYNCED
+
+    task = catalogue.spec(env_id).build_task()
+    n, zero, t = num_envs, np.zeros(num_envs), np.ones(num_envs, dtype=np.int64)
+    if isinstance(task, EngineTask):
+        plant = task.initial_plant(n)
+        nominal = None if task.offsets is None else SYNCED.at(task.offsets, t)
+
+        def step() -> None:
+            task.plant_step(plant, zero, zero, t, nominal, SYNCED)
+
+    elif isinstance(task, LauncherTask):
+        joint, h = np.zeros((3, n)), task.dt / task.substeps / task.rk4_substeps
+        p00, p01, p10, p11, g0t, g0q, g1t, g1q = task.body
+
+        def step() -> None:
+            theta = q = zero
+            for _ in range(task.substeps):
+                d = joint[0]
+                theta_next, q_next = p00 * theta + p01 * q + g0t * d, p10 * theta + p11 * q + g0q * d
+                integrate(joint, zero, h, task.rk4_substeps, task.rk4_params, SYNCED)
+                theta, q = theta_next + g1t * joint[0], q_next + g1q * joint[0]
+
+    else:
+        joint, h = np.zeros((3, n)), task.dt / task.substeps
+
+        def step() -> None:
+            integrate(joint, zero, h, task.substeps, task.rk4_params, SYNCED)
+
+    best = math.inf
+    for _ in range(rounds):
+        start = time.perf_counter()
+        for _ in range(steps):
+            step()
+        best = min(best, (time.perf_counter() - start) / steps)
+    return best
+
+
 def run_benchmark(
     env_ids: Sequence[str] = ENV_IDS,
     sizes: Sequence[int] = VECTOR_SIZES,
     rounds: int = 5,
     progress: Callable[[str], None] | None = None,
+    actions: Sequence[str] = ("zero",),
 ) -> list[dict[str, float | str]]:
-    """Rows {env, mode, num_envs, steps_per_s, reference, reference_steps_per_s, ratio}."""
+    """Rows {env, mode, actions, num_envs, steps_per_s, reference, reference_steps_per_s, ratio,
+    floor_steps_per_s (vector rows; NaN for single), of_floor}; ``actions``: "zero" and/or
+    "random"."""
     import ssme_envs  # noqa: F401  (registers the environments)
 
     if rounds < 1:
@@ -85,40 +146,69 @@ def run_benchmark(
     rows: list[dict[str, float | str]] = []
     for env_id in env_ids:
         episode = gym.spec(env_id).max_episode_steps or 1000
-        say(f"{env_id} (single) beside Pendulum-v1 ...")
-        ours, ref = _race(_single_stepper(env_id), _single_stepper("Pendulum-v1"), SINGLE_ROUND_STEPS, rounds)
-        rows.append(_row(env_id, "single", 1, 1.0 / ours, "Pendulum-v1", 1.0 / ref))
-        for n in sizes:
-            say(f"{env_id} native vector, N = {n}, beside CartPole-v1's ...")
-            ours, ref = _race(_vector_stepper(env_id, n), _vector_stepper("CartPole-v1", n), episode, rounds)
-            rows.append(_row(env_id, "vector", n, n / ours, "CartPole-v1 vector", n / ref))
+        floors = {}
+        for kind in actions:
+            say(f"{env_id} (single, {kind} actions) beside Pendulum-v1 ...")
+            ours, ref = _race(
+                _single_stepper(env_id, kind),
+                _single_stepper("Pendulum-v1", kind),
+                SINGLE_ROUND_STEPS,
+                rounds,
+            )
+            rows.append(_row(env_id, "single", kind, 1, 1.0 / ours, "Pendulum-v1", 1.0 / ref, math.nan))
+            for n in sizes:
+                say(f"{env_id} native vector, N = {n}, {kind} actions, beside CartPole-v1's ...")
+                if n not in floors:
+                    floors[n] = plant_floor(env_id, n)
+                ours, ref = _race(
+                    _vector_stepper(env_id, n, kind), _vector_stepper("CartPole-v1", n, kind), episode, rounds
+                )
+                rows.append(
+                    _row(env_id, "vector", kind, n, n / ours, "CartPole-v1 vector", n / ref, n / floors[n])
+                )
     return rows
 
 
-def _row(env_id: str, mode: str, n: int, rate: float, reference: str, reference_rate: float) -> dict:
+def _row(
+    env_id: str,
+    mode: str,
+    actions: str,
+    n: int,
+    rate: float,
+    reference: str,
+    reference_rate: float,
+    floor: float,
+) -> dict:
     return {
         "env": env_id,
         "mode": mode,
+        "actions": actions,
         "num_envs": n,
         "steps_per_s": rate,
         "reference": reference,
         "reference_steps_per_s": reference_rate,
         "ratio": rate / reference_rate,
+        "floor_steps_per_s": floor,
+        "of_floor": rate / floor,
     }
 
 
 def format_table(rows: list[dict[str, float | str]]) -> str:
     """A markdown table of the benchmark rows."""
     lines = [
-        "| env | mode | N | steps/s | reference | reference steps/s | ratio |",
-        "|---|---|---|---|---|---|---|",
+        "| env | mode | actions | N | steps/s | reference | reference steps/s | ratio | plant floor steps/s "
+        "| of the floor |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
+        floor = "" if math.isnan(r["floor_steps_per_s"]) else f"{r['floor_steps_per_s']:,.0f}"
+        of_floor = "" if math.isnan(r["of_floor"]) else f"{r['of_floor']:.0%}"
         lines.append(
-            f"| {r['env']} | {r['mode']} | {r['num_envs']} | {r['steps_per_s']:,.0f} | {r['reference']} | "
-            f"{r['reference_steps_per_s']:,.0f} | {r['ratio']:.2f}x |"
+            f"| {r['env']} | {r['mode']} | {r['actions']} | {r['num_envs']} | {r['steps_per_s']:,.0f} | "
+            f"{r['reference']} | {r['reference_steps_per_s']:,.0f} | {r['ratio']:.2f}x | {floor} | "
+            f"{of_floor} |"
         )
     return "\n".join(lines)
 
 
-__all__ = ["ENV_IDS", "VECTOR_SIZES", "format_table", "run_benchmark"]
+__all__ = ["ACTIONS", "ENV_IDS", "VECTOR_SIZES", "format_table", "plant_floor", "run_benchmark"]

@@ -16,7 +16,6 @@ only once the run has succeeded (see :mod:`ssme_envs.outputs`).
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import sys
 import textwrap
 import time
@@ -24,7 +23,6 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from ssme_envs.cli_checks import (
-    check_episodes,
     check_seed,
     check_vector_sizes,
     error_line,
@@ -34,7 +32,7 @@ from ssme_envs.cli_checks import (
 from ssme_envs.cli_identify import identify_engine as _identify_engine
 from ssme_envs.cli_identify import identify_nozzle as _identify_nozzle
 from ssme_envs.cli_identify import names as _names
-from ssme_envs.cli_identify import output_directory as _output_directory
+from ssme_envs.cli_identify import noting_replacement
 from ssme_envs.cli_identify import validate_engine as _validate_engine
 from ssme_envs.outputs import run_directory, write_text
 
@@ -160,6 +158,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="alternating rounds per measurement, one episode each; the best counts (default: %(default)s)",
     )
     bench.add_argument("--sizes", default="1,64,1024,4096", help="vector sizes (default: %(default)s)")
+    bench.add_argument(
+        "--actions",
+        default="zero",
+        help="action kinds, comma-separated: zero (episodes run to their limit), random (episodes "
+        "end early, resets timed too) (default: %(default)s)",
+    )
     bench.add_argument("--env", action="append", help="env id to measure (repeatable; default: all)")
     bench.add_argument("--out", type=Path, help="also write the table to this markdown file")
 
@@ -276,7 +280,7 @@ def _evaluate_choices() -> str:
 
 
 def _bench(args: argparse.Namespace) -> int:
-    from ssme_envs.bench import ENV_IDS, format_table, run_benchmark
+    from ssme_envs.bench import ACTIONS, ENV_IDS, format_table, run_benchmark
 
     try:
         sizes = [int(v) for v in args.sizes.split(",")]
@@ -293,7 +297,10 @@ def _bench(args: argparse.Namespace) -> int:
     check_vector_sizes(sizes, env_ids)
     if args.out is not None and (args.out.is_dir() or not args.out.parent.is_dir()):
         raise ValueError(f"--out {args.out}: must be a file in an existing directory")
-    rows = run_benchmark(env_ids, sizes, args.rounds, progress=lambda m: print(m, file=sys.stderr))
+    actions = args.actions.split(",")
+    if not actions or any(kind not in ACTIONS for kind in actions):
+        raise _UsageError(f"--actions must be among {', '.join(ACTIONS)}, got {args.actions!r}")
+    rows = run_benchmark(env_ids, sizes, args.rounds, progress=_to_stderr, actions=actions)
     table = format_table(rows)
     print(table)
     if args.out is not None:
@@ -301,38 +308,18 @@ def _bench(args: argparse.Namespace) -> int:
     return 0
 
 
-def _controllers(env_id: str, specs: str | None, allow_pickle: bool = False) -> dict:
-    from agents import controller_names, parse_controller
-
-    names = controller_names(env_id) if specs is None else list(_names(specs, "--controllers"))
-    return {name: parse_controller(name, env_id, allow_pickle) for name in names}
-
-
-def _run_evaluation(env_id: str, controllers: dict, scenarios: list[str] | None, episodes: int, out: Path,
-                    command: str, seed: int = 0) -> tuple[Path, dict]:  # fmt: skip
-    from ssme_envs.evaluation import evaluate
-    from ssme_envs.results import write_evaluation
-
-    results = evaluate(
-        env_id, controllers, scenarios, episodes, seed, progress=lambda m: print(m, file=sys.stderr)
-    )
-    path = write_evaluation(env_id, results, out, command)
-    return path, results
-
-
 def _evaluate(args: argparse.Namespace) -> int:
-    from ssme_envs.evaluation import check_env_id, check_scenarios, scenario_names
+    from ssme_envs.evaluation import check_env_id
+    from ssme_envs.pipelines import evaluate_to
 
     env_id = check_env_id(args.env)
     check_seed(args.seed)
-    scenarios = None
-    if args.scenario is not None:
-        scenarios = check_scenarios(env_id, _names(args.scenario, "--scenario"))
-    controllers = _controllers(env_id, args.controllers, args.allow_pickle)
-    check_episodes(args.episodes, {env_id: len(scenarios or scenario_names(env_id)) * len(controllers)})
+    scenarios = None if args.scenario is None else _names(args.scenario, "--scenario")
+    controllers = None if args.controllers is None else _names(args.controllers, "--controllers")
     command = "ssme-envs " + " ".join(sys.argv[1:]) if sys.argv[1:2] == ["evaluate"] else "ssme-envs evaluate"
-    with _output_directory(args) as out:
-        _run_evaluation(env_id, controllers, scenarios, args.episodes, out, command, args.seed)
+    with noting_replacement(args.out):
+        evaluate_to(args.out, env_id, controllers, scenarios, args.episodes, args.seed,
+                    allow_pickle=args.allow_pickle, command=command, progress=_to_stderr)  # fmt: skip
     print(f"wrote {args.out / 'results.md'}, {args.out / 'results.json'} and the plots")
     return 0
 
@@ -362,40 +349,17 @@ def _train(args: argparse.Namespace) -> int:
 
 
 def _report(args: argparse.Namespace) -> int:
-    from ssme_envs.main_report import REPORT_PLAN, write_main_report
+    from ssme_envs.pipelines import run_report
 
-    learned = importlib.util.find_spec("stable_baselines3") is not None
-    plan = {
-        env_id: (",".join(s for s in specs.split(",") if learned or not s.startswith("ppo")), scenarios)
-        for env_id, (specs, scenarios) in REPORT_PLAN.items()
-    }
-    check_episodes(args.episodes, {e: len(s) * len(c.split(",")) for e, (c, s) in plan.items()})
     start = time.perf_counter()
-    parser = build_parser()
-    with _output_directory(args) as out:
-        for plant, what in (("engine", "embedded experiment, five power levels"), ("nozzle", "bench test")):
-            print(f"identifying the {plant} ({what}) ...", file=sys.stderr)
-            sub = parser.parse_args(["identify", plant, "--out", str(args.out / plant)])
-            sub.work = out / plant  # inside this run's directory
-            (_identify_engine if plant == "engine" else _identify_nozzle)(sub)
-        if not learned:
-            print("stable-baselines3 is not installed: the report leaves out the PPO policies "
-                  '(pip install ".[rl]")', file=sys.stderr)  # fmt: skip
-        evaluations = {}
-        for env_id, (specs, scenarios) in plan.items():
-            folder = env_id.split("/")[-1]
-            command = (
-                f"ssme-envs evaluate --env {env_id} --controllers {specs} --scenario {','.join(scenarios)} "
-                f"--episodes {args.episodes} --out {args.out / folder}"
-            )
-            print(f"evaluating on {env_id} ...", file=sys.stderr)
-            _, evaluations[env_id] = _run_evaluation(
-                env_id, _controllers(env_id, specs), scenarios, args.episodes, out / folder, command
-            )
-        seconds = time.perf_counter() - start
-        write_main_report(out, evaluations, args.episodes, seconds, shown=args.out)
-    print(f"report: {args.out / 'report.md'} ({time.perf_counter() - start:.0f} s)")
+    with noting_replacement(args.out):
+        path = run_report(args.out, args.episodes, progress=_to_stderr)
+    print(f"report: {path} ({time.perf_counter() - start:.0f} s)")
     return 0
+
+
+def _to_stderr(message: str) -> None:
+    print(message, file=sys.stderr)
 
 
 def _make_dir(path: Path) -> None:

@@ -17,6 +17,8 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
+from ssme_envs.outputs import os_error_text
+
 # Memory per stored episode-step of an evaluation is 8 (d + 2 m + 2) bytes (float64 observations,
 # requested and applied actions, reward, alive); a rollout holds its lists and its arrays at once
 # and the env's metrics copy them, so the pair being run counts 3 times over the stored ones. The
@@ -167,16 +169,6 @@ def check_workers(workers: int) -> None:
 def _gymnasium_error(exc: BaseException) -> bool:
     module = sys.modules.get("gymnasium.error")
     return module is not None and isinstance(exc, module.Error)
-
-
-def os_error_text(exc: OSError) -> str:
-    """``path: reason`` of an OSError (both paths of a rename)."""
-    reason = exc.strerror or str(exc) or type(exc).__name__
-    if exc.filename is not None and exc.filename2 is not None:
-        return f"{exc.filename} -> {exc.filename2}: {reason}"
-    if exc.filename is not None:
-        return f"{exc.filename}: {reason}"
-    return reason
 
 
 def one_line(text: str) -> str:

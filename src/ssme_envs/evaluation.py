@@ -15,6 +15,8 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from ssme_envs.evaluation_result import ActuatorMetrics, ControllerMetrics, EvaluationResult, OutputMetrics
+
 NOISE_OFF = {"backlash": 5e-4, "stiction": 2e-4, "sensor_noise": 0.0}
 LINEAR = {"asymmetric_gains": False, "backlash": 0.0, "stiction": 0.0, "sensor_noise": 0.0}
 
@@ -77,6 +79,12 @@ LAYOUTS = {
     "ssme_envs/NozzleTVC-v0": Layout(("angle",), "deg", (0,), (2,), (3,), ("torque",)),
     "ssme_envs/LauncherPitch-v0": Layout(("attitude",), "deg", (0,), (2,), (3,), ("deflection",)),
 }
+
+
+def layout_of(env_id: str) -> Layout:
+    """The observation layout of ``env_id``: the one place evaluation, results and reports look
+    it up (when the envs publish their layouts, this is where to read them from)."""
+    return LAYOUTS[check_env_id(env_id)]
 
 
 def scenario_names(env_id: str) -> list[str]:
@@ -184,7 +192,7 @@ def _cvar(costs: np.ndarray, level: float = 0.9) -> float:
     return float(worst.mean())
 
 
-def metrics(run: Rollout, layout: Layout) -> dict[str, Any]:
+def metrics(run: Rollout, layout: Layout) -> ControllerMetrics:
     """Per-output tracking and step metrics (means over episodes), actuator wear and limits,
     and the episode cost (minus the return): mean, std, CVaR 90 %."""
     alive = run.alive
@@ -192,45 +200,45 @@ def metrics(run: Rollout, layout: Layout) -> dict[str, Any]:
     returns = (run.rewards * alive).sum(axis=0)
     costs = -returns
     t = np.arange(1, len(alive) + 1) * run.dt
-    out: dict[str, Any] = {
-        "episodes": int(alive.shape[1]),
-        "return_mean": float(returns.mean()),
-        "return_std": float(returns.std()),
-        "cost_mean": float(costs.mean()),
-        "cost_cvar90": _cvar(costs),
-        "terminations": int((steps < len(alive)).sum()),
-        "outputs": {},
-        "actuators": {},
-    }
+    outputs: dict[str, OutputMetrics] = {}
     step_rows = run.obs[1:]
     for i, name in enumerate(layout.outputs):
         e = np.abs(step_rows[:, :, layout.error_columns[i]]) * alive
         y = step_rows[:, :, layout.output_columns[i]]
         r = run.obs[:, :, layout.reference_columns[i]]
         tail = max(1, len(alive) // 10)
-        row = {
-            "iae": float((e.sum(axis=0) * run.dt).mean()),
-            "ise": float(((e**2).sum(axis=0) * run.dt).mean()),
-            "itae": float(((t[:, None] * e).sum(axis=0) * run.dt).mean()),
-            "steady_state_error": float(e[-tail:].mean()),
-        }
-        row.update(_step_response(t, y, r, alive))
-        out["outputs"][name] = row
+        outputs[name] = OutputMetrics(
+            iae=float((e.sum(axis=0) * run.dt).mean()),
+            ise=float(((e**2).sum(axis=0) * run.dt).mean()),
+            itae=float(((t[:, None] * e).sum(axis=0) * run.dt).mean()),
+            steady_state_error=float(e[-tail:].mean()),
+            **_step_response(t, y, r, alive),
+        )
     change = np.diff(run.actions, axis=0, prepend=0.0)
     moving = np.abs(change) > 1e-3
+    actuators: dict[str, ActuatorMetrics] = {}
     for j, name in enumerate(layout.actuators):
         # a reversal: a move against the previous move, holds in between not counted
         reversals = [
             np.count_nonzero(np.diff(np.sign(change[moving[:, i, j] & alive[:, i], i, j])))
             for i in range(alive.shape[1])
         ]
-        out["actuators"][name] = {
-            "effort_rms": float(np.sqrt((run.actions[:, :, j] ** 2 * alive).sum() / alive.sum())),
-            "travel": float((np.abs(change[:, :, j]) * alive).sum(axis=0).mean()),
-            "reversals": float(np.mean(reversals)),
-            "saturated_steps": float(((np.abs(run.requested[:, :, j]) > 1.0) & alive).sum(axis=0).mean()),
-        }
-    return out
+        actuators[name] = ActuatorMetrics(
+            effort_rms=float(np.sqrt((run.actions[:, :, j] ** 2 * alive).sum() / alive.sum())),
+            travel=float((np.abs(change[:, :, j]) * alive).sum(axis=0).mean()),
+            reversals=float(np.mean(reversals)),
+            saturated_steps=float(((np.abs(run.requested[:, :, j]) > 1.0) & alive).sum(axis=0).mean()),
+        )
+    return ControllerMetrics(
+        episodes=int(alive.shape[1]),
+        return_mean=float(returns.mean()),
+        return_std=float(returns.std()),
+        cost_mean=float(costs.mean()),
+        cost_cvar90=_cvar(costs),
+        terminations=int((steps < len(alive)).sum()),
+        outputs=outputs,
+        actuators=actuators,
+    )
 
 
 def _step_response(t: np.ndarray, y: np.ndarray, r: np.ndarray, alive: np.ndarray) -> dict[str, float]:
@@ -256,11 +264,6 @@ def _step_response(t: np.ndarray, y: np.ndarray, r: np.ndarray, alive: np.ndarra
     return summary
 
 
-def scenarios_of(results: Mapping[str, Any]) -> list[str]:
-    """The scenario names of :func:`evaluate`'s results (without the ``_rollouts`` kept beside)."""
-    return [key for key in results if not key.startswith("_")]
-
-
 def evaluate(
     env_id: str,
     controllers: Mapping[str, Callable[[Any], Any]],
@@ -268,44 +271,68 @@ def evaluate(
     episodes: int = 20,
     seed: int = 0,
     progress: Callable[[str], None] | None = None,
-) -> dict[str, Any]:
-    """Metrics of every controller on every scenario: ``{scenario: {controller: metrics}}``, with
-    one rollout per pair kept in ``"_rollouts"`` for plotting. ``controllers`` maps names to
-    factories ``env -> controller`` (a controller is designed on the scenario's env)."""
+) -> EvaluationResult:
+    """Metrics of every controller on every scenario, with one rollout per pair for plotting.
+
+    Parameters
+    ----------
+    env_id : str
+        A registered env of :data:`SCENARIOS`.
+    controllers : Mapping
+        Names to factories ``env -> controller`` (a controller is designed on the scenario's env).
+    scenarios : sequence of str, optional
+        Scenario names (default: all of the env's).
+    episodes : int
+        Episodes per scenario, run together in the env's native vector env.
+    seed : int
+        Seed of the first episode; the same for every controller.
+    progress : callable, optional
+        Receives one line per finished pair.
+
+    Returns
+    -------
+    EvaluationResult
+        ``result[scenario][controller]`` is a :class:`ControllerMetrics`; ``result.rollouts``
+        holds the rollouts.
+    """
     check_env_id(env_id)
     if not isinstance(episodes, int) or episodes < 1:
         raise ValueError(f"episodes must be a positive integer, got {episodes!r}")
     names = scenario_names(env_id) if scenarios is None else check_scenarios(env_id, scenarios)
     say = progress or (lambda _: None)
-    results: dict[str, Any] = {"_rollouts": {}}
+    layout = layout_of(env_id)
+    result = EvaluationResult(env_id)
     total, done = len(names) * len(controllers), 0
     for scenario in names:
-        results[scenario] = {}
         for name, factory in controllers.items():
             start = time.perf_counter()
             env = make_env(env_id, scenario, episodes)
             run = rollout(env, factory(env), name, seed)
             env.close()
-            results[scenario][name] = metrics(run, LAYOUTS[env_id])
-            results["_rollouts"][(scenario, name)] = run
+            scores = metrics(run, layout)
+            result.add(scenario, name, scores, run)
             done += 1
-            say(f"[{done}/{total}] {scenario} / {name}: cost {results[scenario][name]['cost_mean']:.3f} "
+            say(f"[{done}/{total}] {scenario} / {name}: cost {scores.cost_mean:.3f} "
                 f"({time.perf_counter() - start:.1f} s)")  # fmt: skip
-    return results
+    return result
 
 
 __all__ = [
     "LAYOUTS",
     "SCENARIOS",
+    "ActuatorMetrics",
+    "ControllerMetrics",
+    "EvaluationResult",
     "Layout",
+    "OutputMetrics",
     "Rollout",
     "check_env_id",
     "check_scenarios",
     "evaluate",
+    "layout_of",
     "make_env",
     "metrics",
     "rollout",
     "scenario_names",
-    "scenarios_of",
     "step_metrics",
 ]

@@ -4,9 +4,8 @@ from __future__ import annotations
 
 import re
 from pathlib import Path
-from typing import Any
 
-from ssme_envs.evaluation import scenarios_of
+from ssme_envs.evaluation_result import EvaluationResult
 from ssme_envs.outputs import write_text
 
 TRACKING = "ssme_envs/EngineTracking-v0"
@@ -44,16 +43,16 @@ def _embedded(path: Path, folder: str) -> list[str]:
     return [("#" + line if line.startswith("#") else line) for line in text.splitlines()]
 
 
-def _cost(results: dict, scenario: str, controller: str) -> float:
-    return results[scenario][controller]["cost_mean"]
+def _cost(results: EvaluationResult, scenario: str, controller: str) -> float:
+    return results[scenario][controller].cost_mean
 
 
-def _reversals(results: dict, scenario: str, controller: str) -> str:
-    acts = results[scenario][controller]["actuators"]
-    return " / ".join(f"{a['reversals']:.1f}" for a in acts.values())
+def _reversals(results: EvaluationResult, scenario: str, controller: str) -> str:
+    acts = results[scenario][controller].actuators
+    return " / ".join(f"{a.reversals:.1f}" for a in acts.values())
 
 
-def engine_tables(results: dict) -> list[str]:
+def engine_tables(results: EvaluationResult) -> list[str]:
     """LQI against PI on the linear plant, and what the valves (backlash, stiction) cost each."""
     lines = [
         "### EngineTracking: LQI against decoupled PI, and what the valves cost",
@@ -105,7 +104,7 @@ def engine_tables(results: dict) -> list[str]:
     return lines
 
 
-def rl_table(results: dict) -> list[str]:
+def rl_table(results: EvaluationResult) -> list[str]:
     """Learned against classical on the nominal plant, with the valves, and on the full truth."""
     scenarios = ("nominal", "valves", "noise")
     limit = "lq:truth" if "lq:truth" in results["nominal"] else None
@@ -136,7 +135,7 @@ LINEAR_TWINS = {
 }
 
 
-def nozzle_tables(results: dict) -> list[str]:
+def nozzle_tables(results: EvaluationResult) -> list[str]:
     lines = [
         "### NozzleTVC: hysteresis compensation",
         "",
@@ -148,8 +147,8 @@ def nozzle_tables(results: dict) -> list[str]:
         "|---|---|---|---|---|",
     ]
     change = {}
-    for scenario in scenarios_of(results):
-        iae = {c: results[scenario][c]["outputs"]["angle"]["iae"] for c in ("pid", "lqi", "hysteresis")}
+    for scenario in results:
+        iae = {c: results[scenario][c].outputs["angle"].iae for c in ("pid", "lqi", "hysteresis")}
         change[scenario] = 100 * (iae["hysteresis"] / iae["lqi"] - 1)
         lines.append(
             f"| {scenario} | {iae['pid']:.4f} | {iae['lqi']:.4f} | {iae['hysteresis']:.4f} | "
@@ -169,13 +168,13 @@ def nozzle_tables(results: dict) -> list[str]:
 
 def write_main_report(
     out: Path,
-    evaluations: dict[str, dict[str, Any]],
+    evaluations: dict[str, EvaluationResult],
     episodes: int,
     seconds: float,
     shown: Path | None = None,
 ) -> Path:
     """report.md under ``out`` from the identification reports in out/engine and out/nozzle and
-    the evaluations (``{env_id: evaluate() results}``, written to out/<env name>/).
+    the evaluations (``{env_id: evaluate() result}``, written to out/<env name>/).
 
     ``shown`` is the --out of the command line quoted in the report (default ``out``), when
     ``out`` is the temporary directory the run is built in.
@@ -199,11 +198,11 @@ def write_main_report(
     lines += ["### Every scenario", ""]
     for env_id, results in evaluations.items():
         folder = env_id.split("/")[-1]
-        scenarios = scenarios_of(results)
+        scenarios = list(results)
         lines += [f"#### {env_id}", "", f"Tables and plots: [{folder}/results.md]({folder}/results.md).", ""]
         lines += [f"![{scenarios[0]}]({folder}/{scenarios[0]}.png)", ""]
         for scenario in scenarios:
-            costs = ", ".join(f"{c} {m['cost_mean']:.3f}" for c, m in results[scenario].items())
+            costs = ", ".join(f"{c} {m.cost_mean:.3f}" for c, m in results[scenario].items())
             lines.append(f"- {scenario}: cost {costs}")
         lines.append("")
     lines += ["## Identification", ""]

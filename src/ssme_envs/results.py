@@ -9,7 +9,8 @@ from typing import Any
 
 import numpy as np
 
-from ssme_envs.evaluation import LAYOUTS, Rollout, scenarios_of
+from ssme_envs.evaluation import Rollout, layout_of
+from ssme_envs.evaluation_result import ControllerMetrics, EvaluationResult
 from ssme_envs.outputs import save_figure, write_text
 
 
@@ -32,9 +33,9 @@ def _fmt(value: float | None, digits: int = 3) -> str:
     return f"{value:.{digits}g}" if abs(value) < 1e4 else f"{value:.3e}"
 
 
-def scenario_table(env_id: str, scenario: str, rows: dict[str, dict]) -> str:
+def scenario_table(env_id: str, scenario: str, rows: dict[str, ControllerMetrics]) -> str:
     """A markdown table of every controller's metrics on one scenario."""
-    layout = LAYOUTS[env_id]
+    layout = layout_of(env_id)
     head = ["controller", "return", "cost CVaR90", "ends"]
     for out in layout.outputs:
         head += [f"{out} IAE", f"{out} ITAE", f"{out} overshoot %", f"{out} settling s", f"{out} ss err"]
@@ -45,17 +46,17 @@ def scenario_table(env_id: str, scenario: str, rows: dict[str, dict]) -> str:
     for name, m in rows.items():
         cells = [
             name,
-            f"{m['return_mean']:.3f} ± {m['return_std']:.3f}",
-            _fmt(m["cost_cvar90"]),
-            str(m["terminations"]),
+            f"{m.return_mean:.3f} ± {m.return_std:.3f}",
+            _fmt(m.cost_cvar90),
+            str(m.terminations),
         ]
         for out in layout.outputs:
-            o = m["outputs"][out]
-            cells += [_fmt(o["iae"]), _fmt(o["itae"]), _fmt(o["overshoot"]), _fmt(o["settling_time"]),
-                      _fmt(o["steady_state_error"])]  # fmt: skip
+            o = m.outputs[out]
+            cells += [_fmt(o.iae), _fmt(o.itae), _fmt(o.overshoot), _fmt(o.settling_time),
+                      _fmt(o.steady_state_error)]  # fmt: skip
         for act in layout.actuators:
-            a = m["actuators"][act]
-            cells += [_fmt(a["reversals"]), _fmt(a["saturated_steps"])]
+            a = m.actuators[act]
+            cells += [_fmt(a.reversals), _fmt(a.saturated_steps)]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
@@ -66,7 +67,7 @@ def plot_scenario(env_id: str, scenario: str, runs: dict[str, Rollout], path: Pa
     from ssme_envs.identification.report import agg_pyplot
 
     plt = agg_pyplot()
-    layout = LAYOUTS[env_id]
+    layout = layout_of(env_id)
     panels = len(layout.outputs) + len(layout.actuators)
     fig, axes = plt.subplots(panels, 1, figsize=(8, 2.2 * panels), sharex=True, squeeze=False)
     for c, (name, run) in enumerate(runs.items()):
@@ -93,11 +94,11 @@ def plot_scenario(env_id: str, scenario: str, runs: dict[str, Rollout], path: Pa
     plt.close(fig)
 
 
-def write_evaluation(env_id: str, results: dict[str, Any], out: Path, command: str) -> Path:
+def write_evaluation(results: EvaluationResult, out: Path, command: str) -> Path:
     """results.json, results.md and one PNG per scenario under ``out``; returns results.md."""
     out.mkdir(parents=True, exist_ok=True)
-    scenarios = scenarios_of(results)
-    data = {"env": env_id, "command": command, "scenarios": {s: results[s] for s in scenarios}}
+    env_id = results.env_id
+    data = {"env": env_id, "command": command, "scenarios": results.to_dict()}
     write_text(out / "results.json", json.dumps(_clean(data), indent=1) + "\n")
     lines = [f"# Evaluation on {env_id}", "", f"Command: `{command}`", ""]
     lines += [
@@ -108,10 +109,9 @@ def write_evaluation(env_id: str, results: dict[str, Any], out: Path, command: s
         "was beyond [-1, 1].",
         "",
     ]
-    for scenario in scenarios:
+    for scenario in results:
         figure = f"{scenario}.png"
-        runs = {name: results["_rollouts"][(scenario, name)] for name in results[scenario]}
-        plot_scenario(env_id, scenario, runs, out / figure)
+        plot_scenario(env_id, scenario, results.runs(scenario), out / figure)
         lines += [scenario_table(env_id, scenario, results[scenario]), "", f"![{scenario}]({figure})", ""]
     path = out / "results.md"
     write_text(path, "\n".join(lines))

@@ -1,25 +1,31 @@
-"""Gymnasium environments on the identified rocket-hardware models."""
+"""Gymnasium environments on the identified rocket-hardware models.
 
-from ssme_envs.envs.engine_throttle import EngineThrottleEnv
-from ssme_envs.envs.engine_tracking import EngineTrackingEnv
-from ssme_envs.envs.launcher_pitch import LauncherPitchEnv
-from ssme_envs.envs.nozzle_tvc import NozzleTVCEnv
-from ssme_envs.envs.vector import (
-    EngineThrottleVectorEnv,
-    EngineTrackingVectorEnv,
-    LauncherPitchVectorEnv,
-    NozzleTVCVectorEnv,
-    TrackingVectorEnv,
-)
+The env classes load on first access (``ssme_envs.envs.NozzleTVCEnv``), so that importing the
+catalogue (:mod:`ssme_envs.envs.catalogue`) or one env module loads no other env's models.
+"""
 
-__all__ = [
-    "EngineThrottleEnv",
-    "EngineThrottleVectorEnv",
-    "EngineTrackingEnv",
-    "EngineTrackingVectorEnv",
-    "LauncherPitchEnv",
-    "LauncherPitchVectorEnv",
-    "NozzleTVCEnv",
-    "NozzleTVCVectorEnv",
-    "TrackingVectorEnv",
-]
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+_HOMES = {
+    "EngineThrottleEnv": "engine_throttle",
+    "EngineTrackingEnv": "engine_tracking",
+    "LauncherPitchEnv": "launcher_pitch",
+    "NozzleTVCEnv": "nozzle_tvc",
+    "EngineThrottleVectorEnv": "vector",
+    "EngineTrackingVectorEnv": "vector",
+    "LauncherPitchVectorEnv": "vector",
+    "NozzleTVCVectorEnv": "vector",
+    "TrackingVectorEnv": "vector",
+}
+
+
+def __getattr__(name: str) -> Any:
+    if name not in _HOMES:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    return getattr(importlib.import_module(f"{__name__}.{_HOMES[name]}"), name)
+
+
+__all__ = sorted(_HOMES)

@@ -2,20 +2,17 @@
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from ssme_envs.envs.engine_tracking import (
-    EngineTask,
-    EngineTrackingEnv,
-    resolve_truth,
-    table_rows,
-    time_last,
-)
+from ssme_envs.envs.engine_task import EnginePlant, EngineTask, resolve_truth
+from ssme_envs.envs.engine_tracking import EngineTrackingEnv
 from ssme_envs.envs.references import Fault
+from ssme_envs.envs.task import Carrier, Schedule, Value
 from ssme_envs.models.engine import (
     ENGINE_DT,
     TruthConfig,
@@ -65,22 +62,22 @@ class ThrottleTask(EngineTask):
     lam_table: np.ndarray = field(default=None)  # (T + 1, m), lambda - 1 (zero without the gains)
     state_offsets: np.ndarray = field(default=None)  # (T + 1, n), (I - A) C^T c(P)
     x_start: np.ndarray = field(default=None)  # (n,), the equilibrium at P(0) on the schedule
-    tables: tuple = field(default=None, repr=False)  # the tables as float lists, for the scalar step
-    # K, B, lambda - 1 and the state offsets of each step stacked as rows, time last, so that
-    # one gather fetches every parameter of every env's step; (rows, shape) of each table in it
-    schedule: np.ndarray = field(init=False, repr=False)
-    schedule_parts: tuple = field(init=False, repr=False)
+    # K, B, lambda - 1 and the state offsets of each step: as float tuples per step, and stacked
+    # as rows time last, so that one gather fetches every parameter of every env's step
+    schedule: Schedule = field(init=False, repr=False)
+    schedule_parts: tuple = field(init=False, repr=False)  # (rows, shape) of each table in it
 
     def __post_init__(self) -> None:
         super().__post_init__()
         tables = (self.k_table, self.b_table, self.lam_table, self.state_offsets)
-        rows = [time_last(table).reshape(-1, table.shape[0]) for table in tables]
+        rows = [np.moveaxis(table, 0, -1).reshape(-1, table.shape[0]) for table in tables]
         ends = np.cumsum([len(block) for block in rows])
         parts = tuple(
             (slice(end - len(block), end), table.shape[1:])
             for end, block, table in zip(ends, rows, tables, strict=True)
         )
-        object.__setattr__(self, "schedule", np.concatenate(rows))
+        per_step = list(zip(*(table.tolist() for table in tables), strict=True))
+        object.__setattr__(self, "schedule", Schedule(per_step, np.ascontiguousarray(np.concatenate(rows))))
         object.__setattr__(self, "schedule_parts", parts)
 
     @classmethod
@@ -112,10 +109,10 @@ class ThrottleTask(EngineTask):
         offset_out = y_nom - (gain @ u_nom[..., None])[..., 0]
         offset = ((eye - a) @ c.T @ offset_out[..., None])[..., 0]
         x_start = np.linalg.solve(eye - a[0], b[0] @ u_nom[0] + offset[0])
-        fields = {name: getattr(base, name) for name, spec in base.__dataclass_fields__.items() if spec.init}
-        fields.update(horizon=power.size - 1, reference="throttle", offset_table=u_nom)
+        values = {f.name: getattr(base, f.name) for f in dataclasses.fields(base) if f.init}
+        values.update(horizon=power.size - 1, reference="throttle", offset_table=u_nom)
         return cls(
-            **fields,
+            **values,
             power=power,
             nominal_outputs=y_nom,
             k_table=k,
@@ -123,7 +120,6 @@ class ThrottleTask(EngineTask):
             lam_table=lam_minus_one,
             state_offsets=offset,
             x_start=x_start,
-            tables=(k.tolist(), b.tolist(), lam_minus_one.tolist(), offset.tolist()),
         )
 
     @property
@@ -150,37 +146,34 @@ class ThrottleTask(EngineTask):
     def initial_outputs(self) -> np.ndarray:
         return self.x_start[self.n_states - 2 :].copy()
 
-    def initial_plant_floats(self) -> list:
-        u0 = self.nominal_valves[0].tolist()
-        return [self.x_start.tolist(), list(u0), list(u0)]
+    def initial_plant(self, n: int | None) -> EnginePlant:
+        u0 = self.nominal_valves[0]
+        if n is None:
+            return EnginePlant(self.x_start.tolist(), u0.tolist(), u0.tolist())
+        u0 = np.repeat(u0[:, None], n, axis=1)
+        return EnginePlant(np.repeat(self.x_start[:, None], n, axis=1), u0, u0.copy())
 
-    def initial_plant_arrays(self, n: int) -> list:
-        u0 = np.repeat(self.nominal_valves[0][:, None], n, axis=1)
-        return [np.repeat(self.x_start[:, None], n, axis=1), u0, u0.copy()]
-
-    def plant_floats(self, plant: list, cmd: list, t: int, nominal: list) -> tuple[list, float, float]:
+    def plant_step(
+        self, plant: EnginePlant, c0: Value, c1: Value, t: Any, nominal: Any, ops: Carrier
+    ) -> tuple[EnginePlant, Value, Value]:
+        """The linked model with the parameters of step t - 1 -> t (the plant core's float or
+        array arithmetic, the same operations in the same order)."""
         x, linkage, valve = plant
-        k_rows, b_rows, lam, offset = (table[t - 1] for table in self.tables)
-        linkage, valve = valves_floats(linkage, valve, cmd, self.params.half_backlash, self.params.stiction)
-        u_star = [v + g * abs(v - un) for v, g, un in zip(valve, lam, nominal)]
-        x = [
-            xi + oi
-            for xi, oi in zip(dynamics_floats(x, u_star, self.params.shift_source, k_rows, b_rows), offset)
-        ]
-        return [x, linkage, valve], x[-2], x[-1]
-
-    def plant_arrays(
-        self, plant: list, cmd: np.ndarray, t: np.ndarray, synced: bool, nominal: np.ndarray
-    ) -> tuple[list, np.ndarray]:
-        x, linkage, valve = plant
-        rows = table_rows(self.schedule, t, synced)
-        k, b, lam, offset = (
-            rows[part].reshape(*shape, rows.shape[-1]) for part, shape in self.schedule_parts
-        )
-        linkage, valve = valves_arrays(linkage, valve, cmd, self.params.half_backlash, self.params.stiction)
-        u_star = valve + lam * np.abs(valve - nominal)
-        x = dynamics_arrays(x, u_star, self.params.shift_source, k, b) + offset
-        return [x, linkage, valve], x[x.shape[0] - 2 :]
+        half, stick, shift = self.params.half_backlash, self.params.stiction, self.params.shift_source
+        if ops.batched:
+            rows = ops.at(self.schedule, t)
+            k, b, lam, offset = (
+                rows[part].reshape(*shape, rows.shape[-1]) for part, shape in self.schedule_parts
+            )
+            linkage, valve = valves_arrays(linkage, valve, np.stack((c0, c1)), half, stick)
+            u_star = valve + lam * np.abs(valve - nominal)
+            x = dynamics_arrays(x, u_star, shift, k, b) + offset
+        else:
+            k_rows, b_rows, lam, offset = ops.at(self.schedule, t)
+            linkage, valve = valves_floats(linkage, valve, [c0, c1], half, stick)
+            u_star = [v + g * abs(v - un) for v, g, un in zip(valve, lam, nominal)]
+            x = [xi + oi for xi, oi in zip(dynamics_floats(x, u_star, shift, k_rows, b_rows), offset)]
+        return EnginePlant(x, linkage, valve), x[-2], x[-1]
 
 
 class EngineThrottleEnv(EngineTrackingEnv):

@@ -3,34 +3,53 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from types import SimpleNamespace
-from typing import Any
+from typing import Any, ClassVar, NamedTuple
 
 import gymnasium as gym
 import numpy as np
-import scipy.linalg
 
-from ssme_envs.envs.nozzle_tvc import (
-    ARRAY_OPS,
+from ssme_envs.envs.nozzle_task import (
     DEG,
     ENV_STEP_RATE,
     NozzleTask,
-    NozzleTVCEnv,
-    _number,
     episode_options,
+    integrate,
     resolve_nozzle,
 )
 from ssme_envs.envs.references import Fault
+from ssme_envs.envs.task import SYNCED, Carrier, Observation, Value, check_number
+from ssme_envs.envs.tracking_env import TrackingEnv
 from ssme_envs.models.nozzle import MAX_SUBSTEPS, NozzleModel, NozzleParameters, integration_substeps
 
 LAUNCHER_DT = 0.02  # s, a 50 Hz attitude loop
 SERVO_SUBSTEPS = 10  # nozzle servo and integration steps per attitude step: a 500 Hz servo
 SERVO_BANDWIDTH_HZ = 15.0
 SERVO_DAMPING = 0.7
-OBS_NAMES = ("attitude_deg", "rate_deg_s", "ref_deg", "err_deg", "err_int_deg_s", "nozzle_deg", "prev_action")
+LAUNCHER_OBSERVATION = Observation(
+    names=("attitude_deg", "rate_deg_s", "ref_deg", "err_deg", "err_int_deg_s", "nozzle_deg", "prev_action"),
+    units=("deg", "deg/s", "deg", "deg", "deg s", "deg", "-"),
+    high=(20.0, 200.0, 10.0, 30.0, 10.0, 20.0, 1.0),
+)
+OBS_NAMES = LAUNCHER_OBSERVATION.names  # the observation columns, kept for existing imports
+
+
+class LauncherState(NamedTuple):
+    """A launcher episode's state: the nozzle (angle, rate, hysteresis w: a float tuple, or
+    (3, N)), attitude theta (rad), pitch rate q (rad/s), error integral, previous action."""
+
+    nozzle: Any
+    theta: Value
+    q: Value
+    integral: Value
+    prev: Value
+
+
+def _from_nozzle(name: str, doc: str) -> property:
+    """A read-only attribute of the launcher that is its nozzle task's."""
+    return property(lambda self: getattr(self.nozzle, name), doc=doc)
 
 
 def nozzle_servo_gains(plant: NozzleParameters) -> tuple[float, float, float]:
@@ -59,6 +78,8 @@ def body_transition(instability: float, effectiveness: float, h: float) -> tuple
     m[1, 0] = instability
     m[1, 2] = effectiveness
     m[2, 3] = 1.0 / h
+    import scipy.linalg  # here: its import costs more than the whole env's
+
     e = scipy.linalg.expm(m * h)
     phi, ramp_start, ramp = e[:2, :2], e[:2, 2], e[:2, 3]
     g0, g1 = ramp_start - ramp, ramp
@@ -66,10 +87,12 @@ def body_transition(instability: float, effectiveness: float, h: float) -> tuple
 
 
 @dataclass(frozen=True)
-class LauncherTask(NozzleTask):
-    """A launcher pitch episode: the nozzle task's plant, references, noise and faults, with a
-    rigid body around the nozzle and a position servo inside it."""
+class LauncherTask:
+    """A launcher pitch episode: a rigid body around a nozzle task (its joint, episodes, noise,
+    faults and scoring, at the attitude loop's 0.02 s with the servo's 10 samples per step) and
+    a position servo inside it."""
 
+    nozzle: NozzleTask
     instability: float = 3.0  # mu_a = (normal force slope x CP-CG arm) / pitch inertia, 1/s^2
     effectiveness: float = 12.0  # mu_c = thrust x gimbal-CG arm / pitch inertia, 1/s^2 per rad
     max_deflection: float = math.radians(3.0)  # rad, the action's full scale
@@ -79,6 +102,28 @@ class LauncherTask(NozzleTask):
     # models.nozzle.integration_substeps for a 2 ms sample, 1 for Table 1's and the identified
     # joints; a plant that needs more than MAX_SUBSTEPS per attitude step is refused
     rk4_substeps: int = field(init=False, repr=False)
+
+    observation: ClassVar[Observation] = LAUNCHER_OBSERVATION
+    action_names: ClassVar[tuple[str, ...]] = ("nozzle deflection",)
+    n_actions: ClassVar[int] = 1
+    n_channels: ClassVar[int] = 1
+
+    plant = _from_nozzle("plant", "The nozzle's joint (NozzleParameters).")
+    substeps = _from_nozzle("substeps", "Servo samples per attitude step.")
+    horizon = _from_nozzle("horizon", "Steps per episode.")
+    dt = _from_nozzle("dt", "The attitude step, s.")
+    reference = _from_nozzle("reference", "The kind of reference.")
+    noise_std = _from_nozzle("noise_std", "Attitude sensor noise, rad.")
+    fault = _from_nozzle("fault", "The fault (on the servo torque or the attitude sensor), or None.")
+    fault_step = _from_nozzle("fault_step", "The step after which the fault acts (-1: none).")
+    torque_limit = _from_nozzle("torque_limit", "The servo's torque limit, N m.")
+    error_weight = _from_nozzle("error_weight", "Reward weight of the squared error (deg).")
+    rate_weight = _from_nozzle("rate_weight", "Reward weight of the squared action change.")
+    envelope = _from_nozzle("envelope", "The attitude (rad) that ends an episode.")
+    step_cost_bound = _from_nozzle("step_cost_bound", "Largest reward loss of one step inside the envelope.")
+    draw_size = _from_nozzle("draw_size", "Uniform float32 numbers one episode consumes.")
+    shared_references = _from_nozzle("shared_references", "None: references are drawn per episode.")
+    rk4_params = _from_nozzle("rk4_params", "The joint's integrator parameters.")
 
     @classmethod
     def build_launcher(
@@ -92,7 +137,7 @@ class LauncherTask(NozzleTask):
         instability: float = 3.0,
         effectiveness: float = 12.0,
     ) -> LauncherTask:
-        return cls(
+        nozzle = NozzleTask(
             plant=resolve_nozzle(plant),
             substeps=SERVO_SUBSTEPS,
             **episode_options(
@@ -100,12 +145,14 @@ class LauncherTask(NozzleTask):
             ),
             dt=LAUNCHER_DT,
             envelope=math.radians(10.0),
-            instability=_number("instability", instability, 0.0, 100.0),
-            effectiveness=_number("effectiveness", effectiveness, 0.0, 1000.0, low_open=True),
+        )
+        return cls(
+            nozzle=nozzle,
+            instability=check_number("instability", instability, 0.0, 100.0),
+            effectiveness=check_number("effectiveness", effectiveness, 0.0, 1000.0, low_open=True),
         )
 
     def __post_init__(self) -> None:
-        super().__post_init__()
         object.__setattr__(self, "servo", nozzle_servo_gains(self.plant))
         h = self.dt / self.substeps
         object.__setattr__(self, "body", body_transition(self.instability, self.effectiveness, h))
@@ -120,23 +167,42 @@ class LauncherTask(NozzleTask):
         )
         object.__setattr__(self, "rk4_substeps", rk4_substeps)
 
-    @staticmethod
-    def observation_space() -> gym.spaces.Box:
-        high = np.array([20, 200, 10, 30, 10, 20, 1], dtype=np.float32)
-        return gym.spaces.Box(-high, high, dtype=np.float32)
+    @classmethod
+    def observation_space(cls) -> gym.spaces.Box:
+        return cls.observation.space()
+
+    def episodes(
+        self, uniforms: np.ndarray, noise_out: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The nozzle task's episodes: attitude references (rad) and unit noise."""
+        return self.nozzle.episodes(uniforms, noise_out)
+
+    def nonfinite_reward(self, t: Any) -> Any:
+        """As the nozzle task's :meth:`~ssme_envs.envs.nozzle_task.NozzleTask.nonfinite_reward`."""
+        return self.nozzle.nonfinite_reward(t)
+
+    def initial_state(self, n: int | None = None) -> LauncherState:
+        """At rest on the reference trajectory: floats (``n`` None) or arrays of ``n`` envs."""
+        if n is None:
+            return LauncherState((0.0, 0.0, 0.0), 0.0, 0.0, 0.0, 0.0)
+        return LauncherState(np.zeros((3, n)), *(np.zeros(n) for _ in range(4)))
 
     def initial_observation(self, ref: np.ndarray, draws: np.ndarray) -> np.ndarray:
         """Observations at reset (7, N) float32 from the first reference and noise rows (1, N)."""
-        m = self._measure(0.0, np.asarray(draws[0], dtype=np.float64), 0, ARRAY_OPS)
+        m = self.nozzle.measure(0.0, np.asarray(draws[0], dtype=np.float64), 0, SYNCED)
         zeros = np.zeros_like(m)
         return np.stack([m * DEG, zeros, ref[0] * DEG, (ref[0] - m) * DEG, zeros, zeros, zeros]).astype(
             np.float32
         )
 
-    def step(self, state: list, a: Any, t: Any, ref: Any, noise: Any, ops: SimpleNamespace) -> tuple:
-        """One attitude step on floats or (N,) arrays, as :meth:`NozzleTask.step`: the nozzle
-        command ``a`` in [-1, 1] of 3 deg; returns (state, observation values, reward, terminated)."""
+    def step(
+        self, state: LauncherState, action: Sequence[Value], t: Any, ref: Sequence[Value],
+        noise: Sequence[Value], ops: Carrier,
+    ) -> tuple[LauncherState, tuple, Value, Any]:  # fmt: skip
+        """One attitude step, as :class:`~ssme_envs.envs.task.TrackingTask` says: the nozzle
+        command in [-1, 1] of 3 deg; returns (state, the 7 observation values, reward, terminated)."""
         nozzle, theta, q, integral, prev = state
+        a, ref = action[0], ref[0]
         feedforward, k_p, k_d = self.servo
         drive = feedforward * (a * self.max_deflection)
         lim = self.torque_limit
@@ -156,15 +222,21 @@ class LauncherTask(NozzleTask):
             # the body's share of the old deflection is taken before the nozzle moves (in place)
             theta_next = p00 * theta + p01 * q + g0_theta * d
             q_next = p10 * theta + p11 * q + g0_q * d
-            nozzle = ops.integrate(nozzle, torque, rk4_h, rk4_steps, params)
+            nozzle = integrate(nozzle, torque, rk4_h, rk4_steps, params, ops)
             d = nozzle[0]
             theta, q = theta_next + g1_theta * d, q_next + g1_q * d
-        m, e, integral, reward, terminated = self._score(theta, a, prev, t, ref, noise, integral, ops)
+        m, e, integral, reward, terminated = self.nozzle.score(
+            theta, a, prev, t, ref, noise[0], integral, ops
+        )
         obs = (m * DEG, q * DEG, ref * DEG, e, integral, nozzle[0] * DEG, a)
-        return [nozzle, theta, q, integral, a], obs, reward, terminated
+        return LauncherState(nozzle, theta, q, integral, a), obs, reward, terminated
+
+    def render_row(self, state: LauncherState, obs: Sequence[float], ref: Sequence[float]) -> list[float]:
+        """The measured attitude (rad), its reference, the nozzle deflection as a fraction of 3 deg."""
+        return [obs[0] / DEG, ref[0], state.nozzle[0] / self.max_deflection]
 
 
-class LauncherPitchEnv(NozzleTVCEnv):
+class LauncherPitchEnv(TrackingEnv):
     """Track a pitch attitude command on an aerodynamically unstable launcher with the nozzle.
 
     Pitch plane, rigid body, small angles: ``theta'' = mu_a theta + mu_c d`` with ``mu_a = 3
@@ -225,15 +297,19 @@ class LauncherPitchEnv(NozzleTVCEnv):
     """
 
     output_names = ("pitch attitude",)
-    actuator_names = ("nozzle deflection",)
     display_scale = DEG
     display_units = ("deg", "fraction of 3 deg")
     build_task: Callable[..., LauncherTask] = staticmethod(LauncherTask.build_launcher)
 
     action_meaning = "the nozzle deflection command"
 
-    def _actuator_fraction(self) -> float:
-        return self._state[0][0] / self.task.max_deflection
 
-
-__all__ = ["OBS_NAMES", "LauncherPitchEnv", "LauncherTask", "body_transition", "nozzle_servo_gains"]
+__all__ = [
+    "LAUNCHER_OBSERVATION",
+    "OBS_NAMES",
+    "LauncherPitchEnv",
+    "LauncherState",
+    "LauncherTask",
+    "body_transition",
+    "nozzle_servo_gains",
+]

@@ -12,7 +12,6 @@ from functools import cache
 from typing import Any
 
 import numpy as np
-from scipy import signal
 
 REFERENCE_KINDS = ("random_steps", "step", "ramp", "prbs", "sine_sweep", "attitude", "zero", "mixed")
 # what a "mixed" episode draws from, with equal probability
@@ -97,6 +96,8 @@ def reference_signals(
         return wave[None, :, None] * level[:, None, :]
     if kind == "attitude":
         held = reference_signals("random_steps", uniforms, length, amplitude, dt)
+        from scipy import signal  # here: importing it costs more than making an env
+
         return signal.lfilter(*_attitude_filter(dt), held, axis=1)
     if kind == "random_steps":
         count = _hold_count(length, dt)
@@ -137,6 +138,8 @@ def reference_signals(
 def _attitude_filter(dt: float) -> tuple[np.ndarray, np.ndarray]:
     """Zero-order-hold discretization of w^2 / (s + w)^2, w = 2 pi rad/s, unit DC gain."""
     omega = 2.0 * np.pi
+    from scipy import signal
+
     num, den, _ = signal.cont2discrete(([omega**2], [1.0, 2.0 * omega, omega**2]), dt, method="zoh")
     return np.ravel(num), np.asarray(den, dtype=float)
 

@@ -1,8 +1,9 @@
-"""What the single tracking envs share: setup from options, episode draws, reset options, the
-end-of-episode rule, render and close."""
+"""The single env of any tracking task: setup from options, episode draws, reset options, the
+step on floats, the end-of-episode rule, render and close."""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from typing import Any
 
@@ -10,6 +11,7 @@ import gymnasium as gym
 import numpy as np
 
 from ssme_envs.envs.rendering import close_figure, render_history
+from ssme_envs.envs.task import FLOATS
 
 
 class EpisodeOverError(gym.error.ResetNeeded, ValueError, AssertionError):
@@ -55,20 +57,20 @@ def check_reset_options(options: Any, accepted: Mapping[str, str], owner: str) -
 
 
 class TrackingEnv(gym.Env):
-    """Base of the single tracking envs. A subclass names its task constructor (``build_task``)
-    and what it draws (``output_names``, ``actuator_names``, ``display_scale``,
-    ``display_units``); it keeps ``self._history`` rows (outputs, references, actuators) for
-    rendering.
+    """A single env of a tracking task (:class:`~ssme_envs.envs.task.TrackingTask`). A subclass
+    names its task constructor (``build_task``) and what it draws (``output_names``,
+    ``display_scale``, ``display_units``); the actuators are the task's ``action_names``.
 
     ``reset`` takes no options (``None`` or ``{}``; anything else raises). ``step`` after the
     episode ended (terminated or truncated), or before the first ``reset``, raises
-    :class:`EpisodeOverError`: call ``reset`` first."""
+    :class:`EpisodeOverError`: call ``reset`` first. A step whose reward comes out NaN or
+    infinite ends the episode where the task gives a ``nonfinite_reward`` (see NozzleTVC-v0)."""
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 25}
     output_names: tuple[str, ...] = ()
-    actuator_names: tuple[str, ...] = ()
     display_scale: float = 100.0
     display_units: tuple[str, str] = ("%", "normalized")
+    action_meaning: str = ""  # what the action is, for the error message: the actuators' names
     build_task: Any = None
 
     def __init__(self, render_mode: str | None = None, **options: Any) -> None:
@@ -79,7 +81,7 @@ class TrackingEnv(gym.Env):
             )
         self.render_mode = render_mode
         self.action_space = gym.spaces.Box(-1.0, 1.0, (self.task.n_actions,), dtype=np.float32)
-        self.observation_space = self.task.observation_space()
+        self.observation_space = self.task.observation.space()
         self._low, self._high = self.observation_space.low, self.observation_space.high
         self._history: list[list[float]] = []
         self._figure = None
@@ -89,23 +91,68 @@ class TrackingEnv(gym.Env):
     reset_options: Mapping[str, str] = {}  # the keys ``reset(options=...)`` accepts: none
 
     @property
+    def actuator_names(self) -> tuple[str, ...]:
+        return self.task.action_names
+
+    @property
     def elapsed_steps(self) -> int:
         """Steps taken in the current episode."""
         return self._t
 
-    def _draw_episode(
-        self, seed: int | None, options: Any = None
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Check the reset options, seed, draw the episode as the vector env does: references
-        (channels, T + 1), unit noise (channels, T + 1) and the first observation (clipped)."""
+    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[np.ndarray, dict]:
+        """Seed, draw the episode as the vector env does; the first observation and ``{}``."""
         check_reset_options(options, self.reset_options, type(self).__name__)
         gym.Env.reset(self, seed=seed)
         self._ended = ""
-        uniforms = self.np_random.random(self.task.draw_size, dtype=np.float32)
-        refs, noise = self.task.episodes(uniforms[:, None])
-        obs = self.task.initial_observation(refs[:, 0], noise[:, 0])[:, 0]
+        task = self.task
+        uniforms = self.np_random.random(task.draw_size, dtype=np.float32)
+        refs, noise = task.episodes(uniforms[:, None])
+        obs = task.initial_observation(refs[:, 0], noise[:, 0])[:, 0]
+        obs = np.clip(obs, self._low, self._high)
+        # per step, per channel, as floats: the float carrier's operands
+        self._refs = refs[:, :, 0].T.tolist()
+        self._noise = noise[:, :, 0].T.astype(np.float64).tolist()
+        self._state = task.initial_state()
         self._t = 0
-        return refs[:, :, 0], noise[:, :, 0], np.clip(obs, self._low, self._high)
+        if self.render_mode:
+            self._history = [task.render_row(self._state, obs.tolist(), self._refs[0])]
+        return obs, {}
+
+    def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict]:
+        task = self.task
+        n = task.n_actions
+        try:
+            if len(action) != n:
+                raise ValueError
+            values = [float(a) for a in action]
+        except (TypeError, ValueError, IndexError):
+            meaning = self.action_meaning or ", ".join(task.action_names)
+            raise ValueError(
+                f"action must be {n} number{'s' if n > 1 else ''} ({meaning}), got {action!r}"
+            ) from None
+        if not all(map(math.isfinite, values)):
+            raise ValueError(f"action must be finite, got {values if n > 1 else values[0]} (NaN or inf)")
+        self._check_running()
+        values = [min(max(a, -1.0), 1.0) for a in values]
+        t = self._t + 1
+        ref = self._refs[t]
+        self._state, obs, reward, terminated = task.step(self._state, values, t, ref, self._noise[t], FLOATS)
+        self._t = t
+        if self.render_mode:
+            self._history.append(task.render_row(self._state, obs, ref))
+            if self.render_mode == "human":
+                self.render()
+        out = np.array(obs, dtype=np.float32)
+        np.minimum(np.maximum(out, self._low, out=out), self._high, out=out)  # np.clip, without its overhead
+        info = {}
+        if not math.isfinite(reward):  # the state overflowed or went NaN: end the episode (see Episode End)
+            penalty = task.nonfinite_reward(t)
+            if penalty is not None:
+                reward, terminated, info = penalty, True, {"nonfinite": True}
+                np.nan_to_num(out, copy=False, nan=0.0)
+        terminated, truncated = bool(terminated), t >= task.horizon
+        self._ended = "terminated" if terminated else "truncated" if truncated else ""
+        return out, float(reward), terminated, truncated, info
 
     def _check_running(self) -> None:
         """Refuse a step outside an episode (after its end, or before the first reset)."""

@@ -1,9 +1,8 @@
 """Native vector environments: N plants stepped as arrays by their task's batched step.
 
-One class, :class:`TrackingVectorEnv`, serves every tracking task (engine, throttle, nozzle, launcher).
-A task provides ``horizon``, ``n_actions``, ``observation_space()``, ``draw_size``,
-``episodes(uniforms, noise_out)``, ``shared_references``, ``zero_state(n)``,
-``initial_observation(refs, noise)`` and ``batch_step(state, actions, t, refs, noise, synced)``.
+One class, :class:`TrackingVectorEnv`, serves every tracking task
+(:class:`~ssme_envs.envs.task.TrackingTask`: engine, throttle, nozzle, launcher), stepping it on
+(N,) rows with the array carrier.
 Sub-env ``i`` is seeded with ``seed + i`` and draws its episodes from its own
 generator exactly as the scalar env does, so the vector env equals gymnasium's
 ``SyncVectorEnv`` of the scalar env bit for bit, in each autoreset mode (NEXT_STEP, SAME_STEP,
@@ -25,10 +24,12 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
+from ssme_envs.envs.engine_task import EngineTask
 from ssme_envs.envs.engine_throttle import ThrottleTask
-from ssme_envs.envs.engine_tracking import EngineTask
 from ssme_envs.envs.launcher_pitch import LauncherTask
-from ssme_envs.envs.nozzle_tvc import NozzleTask
+from ssme_envs.envs.nozzle_task import NozzleTask
+from ssme_envs.envs.sub_env import SubEnv
+from ssme_envs.envs.task import GATHER, SYNCED, set_columns
 from ssme_envs.envs.tracking_env import EpisodeOverError, check_reset_options
 
 RESET_OPTIONS = {"reset_mask": "a numpy bool array of shape (num_envs,), at least one True"}
@@ -102,7 +103,7 @@ class TrackingVectorEnv(VectorEnv):
         self.render_mode = None
         self.single_action_space = gym.spaces.Box(-1.0, 1.0, (self.task.n_actions,), dtype=np.float32)
         self.action_space = batch_space(self.single_action_space, num_envs)
-        self.single_observation_space = self.task.observation_space()
+        self.single_observation_space = self.task.observation.space()
         self.observation_space = batch_space(self.single_observation_space, num_envs)
         self._low, self._high = self.single_observation_space.low, self.single_observation_space.high
         n, length, channels = num_envs, self.task.horizon + 1, self.task.n_channels
@@ -124,7 +125,7 @@ class TrackingVectorEnv(VectorEnv):
         self._t = np.zeros(n, dtype=np.int64)
         self._synced = True  # every env at the same step: reads are slices, not gathers
         self._rows = np.arange(n)
-        self._state = self.task.zero_state(n)
+        self._state = self.task.initial_state(n)
         # NEXT_STEP: restart at the next step; DISABLED: the episode is over until a reset
         self._autoreset = np.full(n, mode == AutoresetMode.DISABLED)
         self._obs = np.zeros((n, *self.single_observation_space.shape), dtype=np.float32)  # last returned
@@ -164,9 +165,9 @@ class TrackingVectorEnv(VectorEnv):
         task, k = self.task, len(envs)
         every = k == self.num_envs
         if every:
-            self._state = task.zero_state(k)
+            self._state = task.initial_state(k)
         else:
-            _set_columns(self._state, task.zero_state(k), envs)
+            set_columns(self._state, task.initial_state(k), envs)
         draws = self._draws[:k]
         for row, i in enumerate(envs):
             self._rngs[i].random(out=draws[row], dtype=np.float32)
@@ -265,9 +266,14 @@ class TrackingVectorEnv(VectorEnv):
                 refs = np.take(self._shared_refs, t, axis=1)
             else:
                 refs = np.take(self._refs.reshape(len(self._refs), -1), flat, axis=1)
-        self._state, obs, reward, terminated = task.batch_step(
-            self._state, clipped, t, refs, noise, self._synced
+        self._state, values, reward, terminated = task.step(
+            self._state, clipped, t, refs, noise.astype(np.float64), SYNCED if self._synced else GATHER
         )
+        # the observation values as rows of a float32 table, handed out transposed (N, columns)
+        table = np.empty((len(values), self.num_envs), dtype=np.float32)
+        for row, value in zip(table, values, strict=True):
+            row[...] = value
+        obs = table.T
         np.maximum(obs, self._low, out=obs)  # into the observation bounds, as the scalar envs do
         np.minimum(obs, self._high, out=obs)
         truncated = t >= self._limit
@@ -316,120 +322,16 @@ class TrackingVectorEnv(VectorEnv):
         restart at this step (NEXT_STEP) are left alone: their step is discarded. Tasks without
         ``nonfinite_reward`` (the engines, whose unstable plants are refused) pass values on."""
         bad = ~np.isfinite(reward) & ~self._autoreset
-        if not bad.any() or not hasattr(self.task, "nonfinite_reward"):
+        if not bad.any():
             return {}
         rows = np.flatnonzero(bad)
-        reward[rows] = self.task.nonfinite_reward(t[rows])
+        penalty = self.task.nonfinite_reward(t[rows])
+        if penalty is None:
+            return {}
+        reward[rows] = penalty
         terminated[rows] = True
         obs[rows] = np.nan_to_num(obs[rows], nan=0.0)
         return {"nonfinite": bad.copy(), "_nonfinite": bad}
-
-
-class SubEnv:
-    """Sub-env ``index`` of a :class:`TrackingVectorEnv`: a view of what one sub-env has alone.
-
-    A native vector env holds no sub-env objects, only per-sub-env entries of its arrays; this
-    view presents them as the attributes of the scalar env:
-
-    - per sub-env: ``np_random`` (settable: its generator; ``np_random_seed`` becomes -1, as in
-      gymnasium), ``np_random_seed``, ``elapsed_steps`` (steps in the current episode), and
-      ``reset(seed=None, options=None)``: a partial reset of this sub-env alone, returning its
-      observation and info (options as the scalar env's: none);
-    - shared by every sub-env, read-only: ``task``, ``action_space`` and ``observation_space``
-      (the single spaces), ``render_mode``, ``spec`` (a fresh copy of the spec that makes one
-      sub-env, see :meth:`TrackingVectorEnv.single_spec`);
-    - ``get_wrapper_attr``, ``has_wrapper_attr``, ``set_wrapper_attr``, as on a gymnasium env.
-
-    Nothing else exists per sub-env: ``step``, ``close``, ``render`` and other names raise
-    AttributeError (a sub-env steps with its batch), as does setting anything but ``np_random``.
-    """
-
-    __slots__ = ("_index", "_venv")
-    _names = (
-        "np_random", "np_random_seed", "elapsed_steps", "reset", "task", "action_space",
-        "observation_space", "render_mode", "spec", "get_wrapper_attr", "has_wrapper_attr",
-        "set_wrapper_attr",
-    )  # fmt: skip
-
-    def __init__(self, venv: TrackingVectorEnv, index: int) -> None:
-        object.__setattr__(self, "_venv", venv)
-        object.__setattr__(self, "_index", index)
-
-    def __repr__(self) -> str:
-        return f"SubEnv({type(self._venv).__name__}, index={self._index})"
-
-    def __getattr__(self, name: str) -> Any:
-        raise AttributeError(
-            f"{name!r} does not exist per sub-env of the native {type(self._venv).__name__} (a sub-env "
-            f"steps, renders and closes with its batch); a sub-env has {', '.join(self._names)}"
-        )
-
-    def __setattr__(self, name: str, value: Any) -> None:
-        if name != "np_random":
-            raise AttributeError(
-                f"cannot set {name!r} on one sub-env of the native {type(self._venv).__name__}: "
-                "only np_random is per sub-env and settable"
-            )
-        object.__setattr__(self, name, value)
-
-    @property
-    def np_random(self) -> np.random.Generator:
-        return self._venv._rngs[self._index]
-
-    @np_random.setter
-    def np_random(self, value: np.random.Generator) -> None:
-        self._venv._rngs[self._index] = value
-        self._venv._seeds[self._index] = -1
-
-    @property
-    def np_random_seed(self) -> int:
-        return self._venv._seeds[self._index]
-
-    @property
-    def elapsed_steps(self) -> int:
-        return int(self._venv._t[self._index])
-
-    @property
-    def task(self) -> Any:
-        return self._venv.task
-
-    @property
-    def action_space(self) -> gym.spaces.Box:
-        return self._venv.single_action_space
-
-    @property
-    def observation_space(self) -> gym.spaces.Box:
-        return self._venv.single_observation_space
-
-    @property
-    def render_mode(self) -> None:
-        return self._venv.render_mode
-
-    @property
-    def spec(self) -> gym.envs.registration.EnvSpec | None:
-        return self._venv.single_spec()
-
-    def reset(
-        self, *, seed: int | None = None, options: Mapping[str, Any] | None = None
-    ) -> tuple[np.ndarray, dict[str, Any]]:
-        """Start a new episode in this sub-env only; its first observation and info."""
-        venv = self._venv
-        options = check_reset_options(options, {}, f"sub-env of {type(venv).__name__}")
-        seeds: list[int | None] = [None] * venv.num_envs
-        seeds[self._index] = seed
-        mask = np.zeros(venv.num_envs, dtype=bool)
-        mask[self._index] = True
-        obs, _ = venv.reset(seed=seeds, options={**options, "reset_mask": mask})
-        return obs[self._index], {}
-
-    def get_wrapper_attr(self, name: str) -> Any:
-        return getattr(self, name)
-
-    def has_wrapper_attr(self, name: str) -> bool:
-        return hasattr(self, name)
-
-    def set_wrapper_attr(self, name: str, value: Any, *, force: bool = True) -> None:
-        setattr(self, name, value)
 
 
 def _transpose(table: np.ndarray, out: np.ndarray | None = None, tile: int = 256) -> np.ndarray:
@@ -441,15 +343,6 @@ def _transpose(table: np.ndarray, out: np.ndarray | None = None, tile: int = 256
         for j in range(0, cols, tile):
             out[j : j + tile, i : i + tile] = table[i : i + tile, j : j + tile].T
     return out
-
-
-def _set_columns(state: list, fresh: list, envs: np.ndarray) -> None:
-    """Write the columns (last axis) ``envs`` of every array in a nested state list."""
-    for block, new in zip(state, fresh, strict=True):
-        if isinstance(block, list):
-            _set_columns(block, new, envs)
-        else:
-            block[..., envs] = new
 
 
 class EngineTrackingVectorEnv(TrackingVectorEnv):

@@ -44,7 +44,7 @@ import scipy.linalg
 import scipy.signal
 
 from ssme_envs.identification.alpha_canonical import check_record
-from ssme_envs.models.statespace import check_dt
+from ssme_envs.models.linear import Dimensions, StateSpace, check_dt
 
 DEFAULT_MAX_ORDER = 10
 # Target for the neglected term of the innovations estimate: rho(A - K C)^J below this.
@@ -64,7 +64,7 @@ HORIZON_REFINEMENTS = 2
 
 
 @dataclass(frozen=True, eq=False)
-class InnovationsModel:
+class InnovationsModel(Dimensions):
     """Discrete innovations-form model ``x+ = A x + B u + K e``, ``y = C x + D u + e``.
 
     Attributes
@@ -96,21 +96,10 @@ class InnovationsModel:
             object.__setattr__(self, name, mats[name])
         object.__setattr__(self, "dt", check_dt(self.dt))
 
-    @property
-    def n_states(self) -> int:
-        return self.A.shape[0]
-
-    @property
-    def n_inputs(self) -> int:
-        return self.B.shape[1]
-
-    @property
-    def n_outputs(self) -> int:
-        return self.C.shape[0]
-
-    def poles(self) -> np.ndarray:
-        """Eigenvalues of ``A`` (discrete poles, dimensionless)."""
-        return np.linalg.eigvals(self.A)
+    def state_space(self) -> StateSpace:
+        """The deterministic part ``(A, B, C, D)`` as the package's one state-space type (the
+        innovations gain ``K`` is the predictor's, not the plant's)."""
+        return StateSpace(self.A, self.B, self.C, self.dt, self.D)
 
     def simulate(self, u: np.ndarray, y: np.ndarray | None = None) -> np.ndarray:
         """Model output, shape (T, p).

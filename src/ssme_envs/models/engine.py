@@ -5,8 +5,9 @@ adds in front of it: valve linkage backlash and valve stiction (isolated from th
 dynamics in the paper, "determined from manufacturer's specifications or bench testing"), the
 asymmetric input gains lambda of eq 36, and sensor noise on the measured outputs.
 
-One core, :class:`EngineCore`, steps N independent engines at once; the simulators below and
-the environments use it.
+The step exists on floats (:func:`step_floats`, one engine) and on arrays (:func:`step_arrays`,
+N engines), one arithmetic: the env tasks step these (``envs.engine_task``); :class:`EngineCore`
+holds N engines' state around :func:`step_arrays` for the simulators below.
 
 Valve nonlinearities (defaults are assumptions: the paper gives no widths):
 

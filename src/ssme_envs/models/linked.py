@@ -24,8 +24,6 @@ from __future__ import annotations
 from functools import cached_property
 
 import numpy as np
-from scipy.integrate import cumulative_trapezoid
-from scipy.interpolate import PchipInterpolator
 
 from ssme_envs.models.engine import POWER_LEVELS, published_model
 from ssme_envs.models.statespace import AlphaCanonicalModel
@@ -60,6 +58,8 @@ class LinkedEngineModel:
         if np.any(np.diff(self.powers) <= 0):
             raise ValueError("power levels must increase")
         self.template = models[0]
+        from scipy.interpolate import PchipInterpolator  # here: a heavy import, needed per model
+
         self._k = PchipInterpolator(self.powers, np.stack([m.K for m in models]), axis=0)
         self._b = PchipInterpolator(self.powers, np.stack([m.B for m in models]), axis=0)
         self._lam = PchipInterpolator(self.powers, np.stack([m.lam for m in models]), axis=0)
@@ -122,6 +122,8 @@ class LinkedEngineModel:
         eye = np.eye(a.shape[-1])
         gains = c @ np.linalg.solve(eye - a, b)  # (G, p, m)
         slope = np.linalg.solve(gains, np.broadcast_to([0.01, 0.0], (grid.size, 2))[..., None])[..., 0]
+        from scipy.integrate import cumulative_trapezoid
+
         u = cumulative_trapezoid(slope, grid, axis=0, initial=0.0)
         u -= np.array([np.interp(100.0, grid, u[:, j]) for j in range(u.shape[1])])
         return grid, u

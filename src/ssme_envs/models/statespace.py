@@ -1,4 +1,4 @@
-"""Discrete state-space models in alpha-canonical form, with JSON read/write.
+"""Discrete state-space models in alpha-canonical form (their JSON: :mod:`.statespace_json`).
 
 The alpha-canonical form (Eldem and Duyar 1989; NASA TM-104422 eqs 5-8, with H = I) of an
 observable system with observability indices ``mu = (mu_1, ..., mu_p)`` is
@@ -33,8 +33,6 @@ outputs in order) finds ``mu`` has exactly one such realization. For indices in 
 
 from __future__ import annotations
 
-import json
-import numbers
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -43,12 +41,20 @@ from typing import Any
 import numpy as np
 import scipy.linalg
 
+from ssme_envs.models.linear import Dimensions, StateSpace, as_matrix, check_dt
+from ssme_envs.models.statespace_json import dumps_compact, read_json
 from ssme_envs.models.uncertainty import ParameterUncertainty
 
-ENGINE_MODEL_SCHEMA = "ssme-envs/engine-model"
-# Version 2 added C = H [0 I] and the optional ``uncertainty`` block; version 1 files still load.
-ENGINE_MODEL_SCHEMA_VERSION = 2
-SUPPORTED_ENGINE_SCHEMA_VERSIONS = (1, 2)
+# check_dt, as_matrix, dumps_compact and read_json are re-exported: models and identification import them here
+__all__ = [
+    "AlphaCanonicalModel",
+    "AlphaStructure",
+    "as_matrix",
+    "asymmetric_gain",
+    "check_dt",
+    "dumps_compact",
+    "read_json",
+]
 
 
 @dataclass(frozen=True)
@@ -138,30 +144,8 @@ def asymmetric_gain(u: np.ndarray, lam: np.ndarray) -> np.ndarray:
     return u + (np.asarray(lam, dtype=float) - 1.0) * np.abs(u)
 
 
-def check_dt(dt: Any) -> float:
-    """A sample time as a float, or ValueError unless it is a positive finite number of seconds."""
-    if not (isinstance(dt, numbers.Real) and not isinstance(dt, bool) and np.isfinite(dt) and dt > 0):
-        raise ValueError(f"dt must be a positive number of seconds, got {dt!r}")
-    return float(dt)
-
-
-def as_matrix(value: Any, name: str, shape: tuple[int | None, int | None]) -> np.ndarray:
-    try:
-        arr = np.asarray(value, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{name} must be a numeric matrix (list of rows): {exc}") from None
-    if arr.ndim != 2:
-        raise ValueError(f"{name} must be a matrix (list of rows), got {arr.ndim} dimension(s)")
-    for axis, want in enumerate(shape):
-        if want is not None and arr.shape[axis] != want:
-            raise ValueError(f"{name} has shape {arr.shape}, expected {shape[0] or 'n'} x {shape[1] or 'n'}")
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name} contains NaN or inf")
-    return arr
-
-
 @dataclass
-class AlphaCanonicalModel:
+class AlphaCanonicalModel(Dimensions):
     """A discrete engine model ``x(k+1) = A x + B u*``, ``y = C x`` in alpha-canonical form.
 
     Parameters
@@ -276,14 +260,6 @@ class AlphaCanonicalModel:
             output_names=self.output_names,
         )
 
-    @property
-    def n_inputs(self) -> int:
-        return self.B.shape[1]
-
-    @property
-    def n_outputs(self) -> int:
-        return self.C.shape[0]
-
     def markov_parameters(self, count: int) -> np.ndarray:
         """``C A^k B`` for k = 0..count-1, shape (count, p, m)."""
         out = np.empty((count, self.n_outputs, self.n_inputs))
@@ -339,118 +315,29 @@ class AlphaCanonicalModel:
                         errs.append(abs(self.K[s.position(i, d), j]))
         return float(max(errs))
 
+    def state_space(self) -> StateSpace:
+        """The model as the package's one state-space type (D = 0; the input is ``u*``, after the
+        asymmetric gain of eq 36)."""
+        return StateSpace(self.A, self.B, self.C, self.dt)
+
+    # JSON (schema ssme-envs/engine-model) lives in statespace_json; these keep the model's API.
     def to_dict(self) -> dict[str, Any]:
-        return {
-            "schema": ENGINE_MODEL_SCHEMA,
-            "schema_version": ENGINE_MODEL_SCHEMA_VERSION,
-            "dt": self.dt,
-            "A": self.A.tolist(),
-            "B": self.B.tolist(),
-            "C": self.C.tolist(),
-            "observability_indices": list(self.observability_indices),
-            "lambda": self.lam.tolist(),
-            "input_names": list(self.input_names),
-            "output_names": list(self.output_names),
-            "fit": self.fit,
-            **({"uncertainty": self.uncertainty.to_dict()} if self.uncertainty is not None else {}),
-        }
+        from ssme_envs.models.statespace_json import engine_model_to_dict
+
+        return engine_model_to_dict(self)
 
     @classmethod
     def from_dict(cls, data: Any, source: str = "model") -> AlphaCanonicalModel:
         """Build a model from its JSON dictionary, checking everything a user file can get wrong."""
-        if not isinstance(data, dict):
-            raise ValueError(f"{source}: expected a JSON object, got {type(data).__name__}")
-        schema = data.get("schema", ENGINE_MODEL_SCHEMA)
-        if schema != ENGINE_MODEL_SCHEMA:
-            raise ValueError(f"{source}: schema is {schema!r}, expected {ENGINE_MODEL_SCHEMA!r}")
-        version = data.get("schema_version", ENGINE_MODEL_SCHEMA_VERSION)
-        if version not in SUPPORTED_ENGINE_SCHEMA_VERSIONS:
-            raise ValueError(f"{source}: unsupported schema_version {version!r}")
-        missing = [k for k in ("dt", "A", "B", "C", "observability_indices", "lambda") if k not in data]
-        if missing:
-            raise ValueError(f"{source}: missing key(s) {', '.join(missing)}")
-        try:
-            m = len(data["B"][0])
-            p = len(data["C"])
-        except (TypeError, IndexError, KeyError):
-            raise ValueError(f"{source}: B and C must be non-empty lists of rows") from None
-        indices = data["observability_indices"]
-        if not isinstance(indices, list) or not all(isinstance(v, int) for v in indices):
-            raise ValueError(f"{source}: observability_indices must be a list of integers")
-        names = {}
-        for key, count, prefix in (("input_names", m, "u"), ("output_names", p, "y")):
-            value = data.get(key, [f"{prefix}{i}" for i in range(count)])
-            if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
-                raise ValueError(f"{source}: {key} must be a list of strings")
-            names[key] = tuple(value)
-        fit = data.get("fit", {})
-        if not isinstance(fit, dict):
-            raise ValueError(f"{source}: fit must be an object")
-        try:
-            model = cls(
-                A=data["A"],
-                B=data["B"],
-                C=data["C"],
-                dt=data["dt"],
-                observability_indices=tuple(indices),
-                lam=data["lambda"],
-                fit=dict(fit),
-                **names,
-            )
-        except ValueError as exc:
-            raise ValueError(f"{source}: {exc}") from None
-        residual = model.alpha_canonical_residual()
-        if residual > 1e-9 * max(1.0, float(np.max(np.abs(model.A)))):
-            raise ValueError(
-                f"{source}: (A, C) is not in alpha-canonical form for observability indices "
-                f"{list(model.observability_indices)} (largest violation of eqs 5-8: {residual:.3g})"
-            )
-        if data.get("uncertainty") is not None:
-            model.uncertainty = ParameterUncertainty.from_dict(
-                data["uncertainty"], model.parameter_names(), source
-            )
-        return model
+        from ssme_envs.models.statespace_json import engine_model_from_dict
+
+        return engine_model_from_dict(cls, data, source)
 
     def save(self, path: str | Path) -> None:
-        from ssme_envs.outputs import write_text  # atomic: a reader never sees half a model
+        from ssme_envs.models.statespace_json import save_engine_model
 
-        write_text(path, dumps_compact(self.to_dict()) + "\n")
+        save_engine_model(self, path)
 
     @classmethod
     def load(cls, path: str | Path) -> AlphaCanonicalModel:
         return cls.from_dict(read_json(path), source=str(path))
-
-
-def read_json(path: str | Path) -> Any:
-    """Parse a JSON file; a missing file or bad JSON is a ValueError naming the file."""
-    path = Path(path)
-    try:
-        return json.loads(path.read_text())
-    except FileNotFoundError:
-        raise ValueError(f"{path}: no such file") from None
-    except (OSError, json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise ValueError(f"{path}: not valid JSON ({exc})") from None
-
-
-def dumps_compact(obj: Any) -> str:
-    """JSON with one matrix row per line: readable diffs, exact round trip of floats.
-
-    NaN and inf are refused (ValueError): they are not JSON.
-    """
-
-    def render(value: Any, indent: int) -> str:
-        pad = " " * indent
-        if isinstance(value, dict):
-            if not value:
-                return "{}"
-            items = [f"{pad} {json.dumps(k)}: {render(v, indent + 1)}" for k, v in value.items()]
-            return "{\n" + ",\n".join(items) + "\n" + pad + "}"
-        if isinstance(value, list) and value and all(isinstance(v, list) for v in value):
-            rows = [f"{pad} {json.dumps(v, allow_nan=False)}" for v in value]
-            return "[\n" + ",\n".join(rows) + "\n" + pad + "]"
-        if isinstance(value, list) and any(isinstance(v, dict) for v in value):
-            rows = [f"{pad} {render(v, indent + 1)}" for v in value]
-            return "[\n" + ",\n".join(rows) + "\n" + pad + "]"
-        return json.dumps(value, allow_nan=False)
-
-    return render(obj, 0)

@@ -11,9 +11,6 @@ vectorization (scalar envs in a DummyVecEnv; ``ssme-envs train`` steps the nativ
 several times faster). The SAC and TD3 entries are untuned starting points.
 """
 
-ENV_IDS = (
-    "ssme_envs/EngineTracking-v0",
-    "ssme_envs/EngineThrottle-v0",
-    "ssme_envs/NozzleTVC-v0",
-    "ssme_envs/LauncherPitch-v0",
-)
+from ssme_envs.envs.catalogue import ENVS
+
+ENV_IDS = tuple(ENVS)

@@ -1,0 +1,350 @@
+"""The engine tracking task: chamber pressure and mixture ratio on an SSME point model."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, ClassVar, NamedTuple
+
+import numpy as np
+
+from ssme_envs.envs.references import (
+    Fault,
+    check_reference,
+    reference_signals,
+    uniforms_needed,
+    unit_normals,
+)
+from ssme_envs.envs.task import Carrier, Observation, Schedule, Value
+from ssme_envs.models.engine import (
+    POWER_LEVELS,
+    StepParameters,
+    TruthConfig,
+    check_stable_plant,
+    identified_model,
+    output_coupling,
+    step_arrays,
+    step_floats,
+)
+from ssme_envs.models.linked import LinkedEngineModel
+from ssme_envs.models.statespace import AlphaCanonicalModel
+
+ENGINE_OBSERVATION = Observation(
+    names=("pc_pct", "mr_pct", "pc_ref_pct", "mr_ref_pct", "pc_err_pct", "mr_err_pct",
+           "pc_err_int", "mr_err_int", "prev_opov", "prev_fpov"),
+    units=("%", "%", "%", "%", "%", "%", "% s", "% s", "-", "-"),
+    high=(50.0, 50.0, 50.0, 50.0, 100.0, 100.0, 100.0, 100.0, 1.0, 1.0),
+)  # fmt: skip
+
+
+class EnginePlant(NamedTuple):
+    """The plant's state: x (n states), valve linkage and valve positions (2 each); lists of
+    floats for one env, (n, N) and (2, N) arrays for a batch."""
+
+    x: Any
+    linkage: Any
+    valve: Any
+
+
+class EngineState(NamedTuple):
+    """An engine episode's state: plant, error integrals, previous action (2 each), held command
+    (the stuck valve's)."""
+
+    plant: EnginePlant
+    integral: tuple[Value, Value]
+    prev: tuple[Value, Value]
+    held: Value
+
+
+def resolve_truth(truth: TruthConfig | Mapping[str, Any] | None) -> TruthConfig:
+    """A TruthConfig from one, from a dict of its fields, or the default."""
+    if truth is None:
+        return TruthConfig()
+    if isinstance(truth, TruthConfig):
+        return truth
+    if isinstance(truth, Mapping):
+        unknown = sorted(set(truth) - set(TruthConfig.__dataclass_fields__))
+        if unknown:
+            raise ValueError(f"truth: unknown option(s) {', '.join(unknown)}")
+        return TruthConfig(**truth)
+    raise ValueError(f"truth must be a TruthConfig or a dict, got {type(truth).__name__}")
+
+
+def resolve_plant(plant: str | Path | AlphaCanonicalModel, power: float) -> AlphaCanonicalModel:
+    """The engine model behind an environment.
+
+    ``"truth"``: the linked published model at ``power`` (Table I itself at 70-100 %);
+    ``"identified"``: the packaged design model identified at ``power`` (70, 80, 90, 100, 110 %);
+    a path to an engine model.json; or a model object.
+    """
+    if isinstance(plant, AlphaCanonicalModel):
+        return plant
+    if plant == "truth":
+        return LinkedEngineModel().local_model(power)
+    if plant == "identified":
+        if power not in POWER_LEVELS:
+            raise ValueError(f"plant='identified' exists at power {list(POWER_LEVELS)} %, got {power!r}")
+        return identified_model(int(power))
+    if isinstance(plant, str | Path) and str(plant).endswith(".json"):
+        return AlphaCanonicalModel.load(plant)
+    raise ValueError(f"plant must be 'truth', 'identified', a model.json path or a model, got {plant!r}")
+
+
+def design_model(power: float, source: str = "identified") -> AlphaCanonicalModel:
+    """The linear engine model a controller is designed on at ``power`` % (lambda and the valve
+    effects left out): ``"identified"``, the packaged design model identified at the Table I
+    level nearest to ``power``, or ``"truth"``, the published (linked) model at ``power``."""
+    if source == "truth":
+        return LinkedEngineModel().local_model(power)
+    if source == "identified":
+        return identified_model(int(min(POWER_LEVELS, key=lambda level: abs(level - power))))
+    raise ValueError(f"design model source must be 'identified' or 'truth', got {source!r}")
+
+
+@dataclass(frozen=True)
+class EngineTask:
+    """Everything an engine tracking episode needs, shared by the scalar and the vector env."""
+
+    params: StepParameters
+    n_states: int
+    dt: float
+    horizon: int
+    action_scale: float
+    amplitude: np.ndarray
+    reference: str
+    noise_std: np.ndarray
+    fault: Fault | None
+    operating_power: float = 100.0  # %, the power level of the point model
+    error_weight: float = 0.1
+    rate_weight: float = 0.1
+    envelope: float = 0.1  # tracking error (noise-free, normalized) that ends an episode (10 %)
+    integral_limit: float = 100.0  # % s, anti-windup bound of the error integrals
+    offset_table: np.ndarray | None = field(default=None, repr=False)  # (T + 1, m) added to commands
+    rows: tuple = field(init=False, repr=False)  # K, B, lambda - 1 as floats, for the float core
+    noise_scale: tuple[float, float] = field(init=False, repr=False)  # noise_std as floats
+    offsets: Schedule | None = field(init=False, repr=False)  # offset_table for both carriers
+    fault_step: int = field(init=False)  # the step after which the fault acts (-1: none)
+    # largest reward loss of one step inside the envelope (errors and valve rates at their bounds)
+    step_cost_bound: float = field(init=False)
+
+    observation: ClassVar[Observation] = ENGINE_OBSERVATION
+    action_names: ClassVar[tuple[str, ...]] = ("OPOV", "FPOV")
+    n_actions: ClassVar[int] = 2
+    n_channels: ClassVar[int] = 2  # Pc, MR
+
+    @classmethod
+    def build(
+        cls,
+        power: float = 100.0,
+        plant: str | Path | AlphaCanonicalModel = "truth",
+        truth: TruthConfig | Mapping[str, Any] | None = None,
+        reference: str = "random_steps",
+        reference_amplitude: float | tuple[float, float] = 0.01,
+        fault: Mapping[str, Any] | Fault | None = None,
+        episode_seconds: float = 10.0,
+        action_scale: float = 0.02,
+    ) -> EngineTask:
+        power = LinkedEngineModel.check_power(power)
+        model = resolve_plant(plant, power)
+        if model.n_inputs != 2 or model.n_outputs != 2:
+            raise ValueError(
+                "plant must have 2 inputs (OPOV, FPOV) and 2 outputs (Pc, MR), "
+                f"got {model.n_inputs} and {model.n_outputs}"
+            )
+        if output_coupling(model) is not None:
+            raise ValueError(
+                "plant couples its outputs (C = H [0 I] with H != I, indices "
+                f"{list(model.observability_indices)}): the engine environments step models whose "
+                "outputs are their last two states; identify with --indices 2,2"
+            )
+        check_stable_plant(model)
+        config = resolve_truth(truth)
+        check_reference(reference)
+        try:
+            amplitude = np.broadcast_to(np.asarray(reference_amplitude, dtype=float), (2,)).copy()
+        except (TypeError, ValueError):
+            raise ValueError(
+                f"reference_amplitude must be one number or two, got {reference_amplitude!r}"
+            ) from None
+        if not np.all(np.isfinite(amplitude)) or np.any(amplitude < 0) or np.any(amplitude > 0.05):
+            raise ValueError(
+                f"reference_amplitude must be within 0-0.05 (normalized), got {reference_amplitude!r}"
+            )
+        if not (isinstance(episode_seconds, int | float) and 1.0 <= episode_seconds <= 3600.0):
+            raise ValueError(f"episode_seconds must be within 1-3600 s, got {episode_seconds!r}")
+        if not (isinstance(action_scale, int | float) and 0 < action_scale <= 0.2):
+            raise ValueError(
+                f"action_scale must be within (0, 0.2] normalized valve travel, got {action_scale!r}"
+            )
+        try:
+            noise = np.broadcast_to(np.atleast_1d(np.asarray(config.sensor_noise, dtype=float)), (2,)).copy()
+        except ValueError:
+            raise ValueError(
+                f"truth sensor_noise must be one number or two, got {config.sensor_noise!r}"
+            ) from None
+        return cls(
+            params=StepParameters.from_model(model, config),
+            n_states=model.A.shape[0],
+            dt=model.dt,
+            horizon=round(episode_seconds / model.dt),
+            action_scale=float(action_scale),
+            amplitude=amplitude,
+            reference=reference,
+            noise_std=noise,
+            fault=Fault.parse(fault, 2, 2),
+            operating_power=power,
+        )
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "rows", self.params.floats())
+        object.__setattr__(self, "noise_scale", tuple(self.noise_std.tolist()))
+        offsets = None if self.offset_table is None else Schedule.of(self.offset_table)
+        object.__setattr__(self, "offsets", offsets)
+        object.__setattr__(
+            self, "fault_step", round(self.fault.time / self.dt) if self.fault is not None else -1
+        )
+        if self.fault is not None and self.fault_step >= self.horizon:
+            raise ValueError(
+                f"fault time {self.fault.time:g} s is beyond the episode ({self.horizon * self.dt:g} s)"
+            )
+        bias = (
+            abs(self.fault.magnitude) if self.fault is not None and self.fault.kind == "sensor_bias" else 0.0
+        )
+        error = 100.0 * (self.envelope + float(self.amplitude.max()) + bias) + 50.0
+        object.__setattr__(
+            self, "step_cost_bound", self.error_weight * 2 * error**2 + self.rate_weight * 2 * 2.0**2
+        )
+
+    def design_model(self, source: str = "identified") -> AlphaCanonicalModel:
+        """The linear model a controller is designed on: :func:`design_model` at the env's power."""
+        return design_model(self.operating_power, source)
+
+    @classmethod
+    def observation_space(cls) -> Any:
+        return cls.observation.space()
+
+    @property
+    def shared_references(self) -> np.ndarray | None:
+        """References common to every episode, (horizon + 1, 2), or None when drawn per episode."""
+        return None
+
+    @property
+    def draw_size(self) -> int:
+        """Uniform float32 numbers one episode consumes: sensor noise, then the reference's."""
+        return 2 * (self.horizon + 1) + uniforms_needed(self.reference, self.horizon + 1, 2, self.dt)
+
+    def episodes(
+        self, uniforms: np.ndarray, noise_out: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """References and sensor noise of k episodes from their uniform draws, float32 of shape
+        (draw_size, k), episode axis last: references (2, horizon + 1, k) float64 and unit noise
+        (2, horizon + 1, k) float32, scaled by ``noise_std`` at each step. One float32 call to
+        the generator per episode keeps resets cheap (the vector env resets thousands at once),
+        and an episode computed alone equals the same episode in a batch. ``noise_out``: an
+        array to write the noise into."""
+        length, k = self.horizon + 1, uniforms.shape[1]
+        uniforms = np.ascontiguousarray(uniforms, dtype=np.float32)
+        out = None if noise_out is None else noise_out.reshape(2 * length, k)
+        noise = unit_normals(uniforms[: 2 * length], out).reshape(2, length, k)
+        return self.references(uniforms[2 * length :]), noise
+
+    def references(self, uniforms: np.ndarray) -> np.ndarray:
+        """The references (2, horizon + 1, k) of k episodes from their uniforms (m, k)."""
+        return reference_signals(
+            self.reference, uniforms.astype(np.float64), self.horizon + 1, self.amplitude, self.dt
+        )
+
+    # The plant: point model with valves (this class) or the linked model (the throttle task).
+    @property
+    def initial_outputs(self) -> np.ndarray:
+        return np.zeros(2)
+
+    def initial_plant(self, n: int | None) -> EnginePlant:
+        if n is None:
+            return EnginePlant([0.0] * self.n_states, [0.0, 0.0], [0.0, 0.0])
+        return EnginePlant(np.zeros((self.n_states, n)), np.zeros((2, n)), np.zeros((2, n)))
+
+    def initial_state(self, n: int | None = None) -> EngineState:
+        """The state at reset: floats (``n`` None) or arrays of ``n`` envs."""
+        if n is None:
+            return EngineState(self.initial_plant(n), (0.0, 0.0), (0.0, 0.0), 0.0)
+        pair = lambda: (np.zeros(n), np.zeros(n))  # noqa: E731  (fresh arrays: written by column)
+        return EngineState(self.initial_plant(n), pair(), pair(), np.zeros(n))
+
+    def plant_step(
+        self, plant: EnginePlant, c0: Value, c1: Value, t: Any, nominal: Any, ops: Carrier
+    ) -> tuple[EnginePlant, Value, Value]:
+        """The plant under the valve commands (c0, c1) of step t - 1 -> t: (plant, Pc, MR).
+        ``nominal``: the commands' offsets of the step (the throttle's schedule) or None."""
+        if ops.batched:
+            x, linkage, valve = step_arrays(*plant, np.stack((c0, c1)), self.params)
+            return EnginePlant(x, linkage, valve), x[-2], x[-1]
+        x, linkage, valve = step_floats(*plant, [c0, c1], self.params, self.rows)
+        return EnginePlant(x, linkage, valve), x[-2], x[-1]
+
+    @staticmethod
+    def valve_positions(plant: EnginePlant) -> Any:
+        return plant.valve
+
+    def step(
+        self, state: EngineState, action: Sequence[Value], t: Any, ref: Sequence[Value],
+        noise: Sequence[Value], ops: Carrier,
+    ) -> tuple[EngineState, tuple, Value, Any]:  # fmt: skip
+        """One step, as :class:`~ssme_envs.envs.task.TrackingTask` says: actions in [-1, 1]
+        (OPOV, FPOV), the sensor noise in unit draws. Returns (state, the 10 observation values,
+        reward, terminated)."""
+        plant, integral, prev, held = state
+        a0, a1 = action[0], action[1]
+        cmd = [a0 * self.action_scale, a1 * self.action_scale]
+        nominal = None
+        if self.offsets is not None:  # the throttle's nominal valve schedule
+            nominal = ops.at(self.offsets, t)
+            cmd = [nominal[0] + cmd[0], nominal[1] + cmd[1]]
+        fault = self.fault
+        if fault is not None and fault.kind != "sensor_bias":
+            i, active = fault.index, t > self.fault_step
+            if fault.kind == "stuck_valve":
+                held = ops.where(t == self.fault_step + 1, cmd[i], held)
+                cmd[i] = ops.where(active, held, cmd[i])
+            else:  # gain_loss
+                cmd[i] = ops.where(active, cmd[i] * fault.magnitude, cmd[i])
+        plant, y0, y1 = self.plant_step(plant, cmd[0], cmd[1], t, nominal, ops)
+        s0, s1 = self.noise_scale
+        m = [y0 + noise[0] * s0, y1 + noise[1] * s1]
+        if fault is not None and fault.kind == "sensor_bias":
+            m[fault.index] = ops.where(t >= self.fault_step, m[fault.index] + fault.magnitude, m[fault.index])
+        r0, r1 = ref[0], ref[1]
+        e0, e1 = 100.0 * (r0 - m[0]), 100.0 * (r1 - m[1])
+        lim = self.integral_limit
+        i0 = ops.clip(integral[0] + e0 * self.dt, -lim, lim)
+        i1 = ops.clip(integral[1] + e1 * self.dt, -lim, lim)
+        d0, d1 = a0 - prev[0], a1 - prev[1]
+        reward = -self.error_weight * (e0 * e0 + e1 * e1) - self.rate_weight * (d0 * d0 + d1 * d1)
+        terminated = (abs(y0 - r0) > self.envelope) | (abs(y1 - r1) > self.envelope)
+        reward = ops.where(terminated, reward - self.step_cost_bound * (self.horizon - t + 1), reward)
+        obs = (100.0 * m[0], 100.0 * m[1], 100.0 * r0, 100.0 * r1, e0, e1, i0, i1, a0, a1)
+        return EngineState(plant, (i0, i1), (a0, a1), held), obs, reward, terminated
+
+    def initial_observation(self, ref: np.ndarray, draws: np.ndarray) -> np.ndarray:
+        """Observations at reset (10, N) float32 from the references and unit noise draws of
+        step 0, (2, N) each."""
+        m = self.initial_outputs[:, None] + draws * self.noise_std[:, None]
+        fault = self.fault
+        if fault is not None and fault.kind == "sensor_bias" and self.fault_step == 0:
+            m[fault.index] = m[fault.index] + fault.magnitude
+        zeros = np.zeros_like(m)
+        obs = np.concatenate([100.0 * m, 100.0 * ref, 100.0 * (ref - m), zeros, zeros], axis=0)
+        return obs.astype(np.float32)
+
+    def nonfinite_reward(self, t: Any) -> None:
+        """None: an engine step's values are passed on as they are (unstable plants are refused)."""
+        return None
+
+    def render_row(self, state: EngineState, obs: Sequence[float], ref: Sequence[float]) -> list[float]:
+        """Measured Pc and MR, their references, the valve positions (normalized)."""
+        valve = self.valve_positions(state.plant)
+        return [obs[0] / 100.0, obs[1] / 100.0, *ref, valve[0], valve[1]]
+
+
+__all__ = ["ENGINE_OBSERVATION", "EnginePlant", "EngineState", "EngineTask", "design_model"]

@@ -1,0 +1,297 @@
+"""The nozzle tracking task: a torque actuator and a hysteretic flexible joint."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, ClassVar, NamedTuple
+
+import gymnasium as gym
+import numpy as np
+
+from ssme_envs.envs.references import Fault, check_reference, reference_signals, uniforms_needed, unit_normals
+from ssme_envs.envs.task import SYNCED, Carrier, Observation, Value, check_number
+from ssme_envs.models.nozzle import (
+    DEFAULT_TORQUE_LIMIT,
+    MAX_SUBSTEPS,
+    NOZZLE_DT,
+    NozzleModel,
+    NozzleParameters,
+    RK4Parameters,
+    check_stable_substeps,
+    identified_nozzle,
+    integration_substeps,
+    published_nozzle,
+    rk4_arrays,
+    rk4_floats,
+    rk4_parameters,
+)
+
+DEG = 180.0 / math.pi
+# RK4 substeps per sample by h * rate <= 0.25 (models.nozzle.recommended_substeps): 3 for Table 1,
+# within 3e-4 of the motion (9e-4 deg on 3 deg, a sixth of the default sensor noise) where 4
+# substeps give 2e-4 at a third more cost (experiments/results/nozzle_integration_accuracy.md).
+# models.nozzle.integration_substeps adds RK4's stability rule (stiffness, damping and hysteresis
+# rates at h * rate <= 1.3, half the stability limit) and refuses plants that need more than
+# MAX_SUBSTEPS; the accuracy rule sets the count of Table 1's and the identified joints.
+ENV_STEP_RATE = 0.25
+NOZZLE_FAULTS = ("sensor_bias", "gain_loss")
+NOZZLE_OBSERVATION = Observation(
+    names=("angle_deg", "rate_deg_s", "ref_deg", "err_deg", "err_int_deg_s", "prev_action"),
+    units=("deg", "deg/s", "deg", "deg", "deg s", "-"),
+    high=(20.0, 2000.0, 10.0, 30.0, 10.0, 1.0),
+)
+
+
+class NozzleState(NamedTuple):
+    """A nozzle episode's state: plant (angle, rate, hysteresis w: a float tuple, or (3, N)),
+    actuator torque, last measurement, error integral, previous action."""
+
+    plant: Any
+    torque: Value
+    m_prev: Value
+    integral: Value
+    prev: Value
+
+
+def integrate(plant: Any, tau: Value, h: float, steps: int, p: RK4Parameters, ops: Carrier) -> Any:
+    """``steps`` RK4 steps of the joint under the torque tau held: the plant core's float or
+    (in place) array arithmetic, the same operations in the same order."""
+    if ops.batched:
+        rk4_arrays(plant, tau, h, steps, p)
+        return plant
+    return rk4_floats(*plant, tau, h, steps, p)
+
+
+def resolve_nozzle(plant: str | Path | NozzleParameters | NozzleModel) -> NozzleParameters:
+    """The joint behind the env: ``"bouc_wen"`` (Table 1's hysteretic joint, the truth),
+    ``"linear"`` (Table 1's linear row), ``"identified"`` (the packaged model identified from
+    the bench test), a nozzle model.json path, or a parameter/model object."""
+    if isinstance(plant, NozzleParameters):
+        return plant
+    if isinstance(plant, NozzleModel):
+        return plant.plant()
+    if plant in ("bouc_wen", "linear"):
+        return published_nozzle(str(plant))
+    if plant == "identified":
+        return identified_nozzle().plant()
+    if isinstance(plant, str | Path) and str(plant).endswith(".json"):
+        return NozzleModel.load(plant).plant()
+    raise ValueError(
+        "plant must be 'bouc_wen', 'linear', 'identified', a nozzle model.json path or a model, "
+        f"got {plant!r}"
+    )
+
+
+def episode_options(
+    reference: str,
+    amplitude_deg: float,
+    max_amplitude_deg: float,
+    sensor_noise: float,
+    fault: dict | Fault | None,
+    seconds: float,
+    dt: float,
+) -> dict[str, Any]:
+    """The checked episode fields of a nozzle-driven task: horizon, reference, amplitude (rad),
+    noise_std (rad) and fault."""
+    check_reference(reference)
+    amplitude = check_number("reference_amplitude_deg", amplitude_deg, 0.0, max_amplitude_deg)
+    parsed = Fault.parse(fault, 1, 1)
+    if parsed is not None and parsed.kind not in NOZZLE_FAULTS:
+        raise ValueError(f"unknown fault kind {parsed.kind!r}; choose one of {NOZZLE_FAULTS}")
+    return {
+        "horizon": round(check_number("episode_seconds", seconds, 0.1, 3600.0) / dt),
+        "reference": reference,
+        "amplitude": np.array([math.radians(amplitude)]),
+        "noise_std": check_number("sensor_noise", sensor_noise, 0.0, 0.01),
+        "fault": parsed,
+    }
+
+
+@dataclass(frozen=True)
+class NozzleTask:
+    """Everything a nozzle tracking episode needs, shared by the scalar and the vector env."""
+
+    plant: NozzleParameters
+    substeps: int
+    horizon: int
+    reference: str
+    amplitude: np.ndarray  # (1,), rad
+    noise_std: float  # rad
+    fault: Fault | None
+    torque_limit: float = DEFAULT_TORQUE_LIMIT  # N m, the action's full scale
+    lag_gain: float = 1.0  # 1 - exp(-dt / lag): first-order actuator lag per step (1: none)
+    max_torque_change: float = math.inf  # N m per step, the rate limit
+    dt: float = NOZZLE_DT
+    error_weight: float = 0.1
+    rate_weight: float = 0.1
+    envelope: float = math.radians(6.0)  # |angle| that ends an episode (twice the working range)
+    integral_limit: float = 10.0  # deg s
+    rk4_params: RK4Parameters = field(init=False, repr=False)  # floats, for both carriers
+    fault_step: int = field(init=False)
+    # largest reward loss of one step inside the envelope (with 1 deg for noise)
+    step_cost_bound: float = field(init=False)
+
+    observation: ClassVar[Observation] = NOZZLE_OBSERVATION
+    action_names: ClassVar[tuple[str, ...]] = ("torque",)
+    n_actions: ClassVar[int] = 1
+    n_channels: ClassVar[int] = 1
+
+    @classmethod
+    def build(
+        cls,
+        plant: str | Path | NozzleParameters | NozzleModel = "bouc_wen",
+        reference: str = "random_steps",
+        reference_amplitude_deg: float = 3.0,
+        sensor_noise: float = 1e-4,
+        fault: dict | Fault | None = None,
+        episode_seconds: float = 4.0,
+        actuator_lag: float = 0.0,
+        rate_limit: float | None = None,
+        substeps: int | None = None,
+    ) -> NozzleTask:
+        params = resolve_nozzle(plant)
+        episode = episode_options(
+            reference, reference_amplitude_deg, 3.0, sensor_noise, fault, episode_seconds, NOZZLE_DT
+        )
+        lag = check_number("actuator_lag", actuator_lag, 0.0, 1.0)
+        if rate_limit is not None:
+            rate_limit = check_number("rate_limit", rate_limit, 0.0, math.inf, low_open=True)
+        envelope = math.radians(6.0)
+        if substeps is None:
+            substeps = integration_substeps(
+                params, NOZZLE_DT, envelope, DEFAULT_TORQUE_LIMIT, ENV_STEP_RATE, sample="step"
+            )
+        elif not isinstance(substeps, int) or isinstance(substeps, bool) or not 1 <= substeps <= MAX_SUBSTEPS:
+            raise ValueError(f"substeps must be an integer in 1-{MAX_SUBSTEPS}, got {substeps!r}")
+        else:  # the caller's count: accuracy is theirs, stability is checked
+            check_stable_substeps(params, substeps, NOZZLE_DT, envelope, DEFAULT_TORQUE_LIMIT)
+        return cls(
+            plant=params,
+            substeps=substeps,
+            **episode,
+            lag_gain=1.0 if lag == 0 else -math.expm1(-NOZZLE_DT / lag),
+            max_torque_change=math.inf if rate_limit is None else rate_limit * NOZZLE_DT,
+            envelope=envelope,
+        )
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "rk4_params", rk4_parameters(self.plant.normalized()))
+        object.__setattr__(
+            self, "fault_step", round(self.fault.time / self.dt) if self.fault is not None else -1
+        )
+        if self.fault is not None and self.fault_step >= self.horizon:
+            raise ValueError(
+                f"fault time {self.fault.time:g} s is beyond the episode ({self.horizon * self.dt:g} s)"
+            )
+        bias = abs(self.fault.magnitude) if self.fault is not None and self.fault.kind == "sensor_bias" else 0
+        error = DEG * (self.envelope + float(self.amplitude[0]) + bias) + 1.0
+        object.__setattr__(self, "step_cost_bound", self.error_weight * error**2 + self.rate_weight * 2.0**2)
+
+    @classmethod
+    def observation_space(cls) -> gym.spaces.Box:
+        return cls.observation.space()
+
+    @property
+    def shared_references(self) -> None:
+        return None
+
+    @property
+    def draw_size(self) -> int:
+        """Uniform float32 numbers one episode consumes: sensor noise (an even count for the
+        Box-Muller pairs), then the reference's."""
+        length = self.horizon + 1
+        return length + length % 2 + uniforms_needed(self.reference, length, 1, self.dt)
+
+    def episodes(
+        self, uniforms: np.ndarray, noise_out: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """References (1, horizon + 1, k) in rad and unit noise (1, horizon + 1, k) float32 of k
+        episodes from their uniforms (draw_size, k) float32, as for the engine tasks."""
+        length = self.horizon + 1
+        uniforms = np.ascontiguousarray(uniforms, dtype=np.float32)
+        pairs = length + length % 2
+        noise = unit_normals(uniforms[:pairs])[:length][None]
+        if noise_out is not None:
+            noise_out[...] = noise
+            noise = noise_out
+        refs = reference_signals(
+            self.reference, uniforms[pairs:].astype(np.float64), length, self.amplitude, self.dt
+        )
+        return refs, noise
+
+    def initial_state(self, n: int | None = None) -> NozzleState:
+        """At rest (the rate estimate starts from the rest angle): floats (``n`` None) or arrays
+        of ``n`` envs."""
+        if n is None:
+            return NozzleState((0.0, 0.0, 0.0), 0.0, 0.0, 0.0, 0.0)
+        return NozzleState(np.zeros((3, n)), *(np.zeros(n) for _ in range(4)))
+
+    def initial_observation(self, ref: np.ndarray, draws: np.ndarray) -> np.ndarray:
+        """Observations at reset (6, N) float32 from the first reference and noise rows (1, N)."""
+        m = self.measure(0.0, np.asarray(draws[0], dtype=np.float64), 0, SYNCED)
+        e = (ref[0] - m) * DEG
+        zeros = np.zeros_like(m)
+        return np.stack([m * DEG, zeros, ref[0] * DEG, e, zeros, zeros]).astype(np.float32)
+
+    def measure(self, x: Value, noise: Value, t: Any, ops: Carrier) -> Value:
+        """The sensor: x (rad) with noise and the sensor-bias fault."""
+        m = x + noise * self.noise_std
+        fault = self.fault
+        if fault is not None and fault.kind == "sensor_bias":
+            m = ops.where(t >= self.fault_step, m + fault.magnitude, m)
+        return m
+
+    def step(
+        self, state: NozzleState, action: Sequence[Value], t: Any, ref: Sequence[Value],
+        noise: Sequence[Value], ops: Carrier,
+    ) -> tuple[NozzleState, tuple, Value, Any]:  # fmt: skip
+        """One step, as :class:`~ssme_envs.envs.task.TrackingTask` says: the torque command in
+        [-1, 1] of full scale, ``ref`` in rad. Returns (state, the 6 observation values, reward,
+        terminated)."""
+        plant, torque, m_prev, integral, prev = state
+        a, ref = action[0], ref[0]
+        cmd = a * self.torque_limit
+        fault = self.fault
+        if fault is not None and fault.kind == "gain_loss":
+            cmd = ops.where(t > self.fault_step, cmd * fault.magnitude, cmd)
+        target = cmd if self.lag_gain == 1.0 else torque + self.lag_gain * (cmd - torque)
+        if math.isinf(self.max_torque_change):
+            torque = target
+        else:
+            limit = self.max_torque_change
+            torque = torque + ops.clip(target - torque, -limit, limit)
+        plant = integrate(plant, torque, self.dt / self.substeps, self.substeps, self.rk4_params, ops)
+        m, e, integral, reward, terminated = self.score(plant[0], a, prev, t, ref, noise[0], integral, ops)
+        rate = (m - m_prev) * (DEG / self.dt)
+        obs = (m * DEG, rate, ref * DEG, e, integral, a)
+        return NozzleState(plant, torque, m, integral, a), obs, reward, terminated
+
+    def score(self, x: Value, a: Value, prev: Value, t: Any, ref: Value, noise: Value, integral: Value,
+              ops: Carrier) -> tuple:  # fmt: skip
+        """What follows the tracked output x (rad) at step t: measurement m, error e (deg), error
+        integral, reward, terminated (also for the launcher's attitude)."""
+        m = self.measure(x, noise, t, ops)
+        e = (ref - m) * DEG
+        lim = self.integral_limit
+        integral = ops.clip(integral + e * self.dt, -lim, lim)
+        d = a - prev
+        terminated = abs(x) > self.envelope
+        reward = -self.error_weight * (e * e) - self.rate_weight * (d * d)
+        reward = reward - (self.step_cost_bound * (self.horizon - t + 1)) * terminated
+        return m, e, integral, reward, terminated
+
+    def nonfinite_reward(self, t: Any) -> Any:
+        """The reward of step ``t`` (an int or an int array) whose own reward came out NaN or
+        infinite (the plant's state overflowed): the envelope penalty plus the worst cost of a
+        step inside the envelope, ``-(horizon - t + 2) step_cost_bound``, finite."""
+        return -self.step_cost_bound * (self.horizon - t + 2)
+
+    def render_row(self, state: NozzleState, obs: Sequence[float], ref: Sequence[float]) -> list[float]:
+        """The measured angle (rad), its reference, the torque as a fraction of full scale."""
+        return [obs[0] / DEG, ref[0], state.torque / self.torque_limit]
+
+
+__all__ = ["DEG", "NOZZLE_OBSERVATION", "NozzleState", "NozzleTask", "episode_options", "resolve_nozzle"]

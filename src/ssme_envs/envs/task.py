@@ -1,0 +1,157 @@
+"""The tracking-task protocol: what a task gives the scalar env and the native vector env.
+
+A task owns its facts (observation layout, actions, horizon) and one ``step``, written once over
+a :class:`Carrier`: :data:`FLOATS` steps one env on Python floats (an order of magnitude faster
+than numpy on 1-element arrays), :data:`SYNCED` and :data:`GATHER` step N envs on (N,) rows. Both
+carriers run the same IEEE operations in the same order, so an env gives the same bits alone
+and in a batch (the tests hold the vector env to gymnasium's ``SyncVectorEnv`` bit for bit).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any, NamedTuple, Protocol, runtime_checkable
+
+import gymnasium as gym
+import numpy as np
+
+Value = Any  # a Python float (one env) or an (N,) float64 row (a batch)
+
+
+class Observation(NamedTuple):
+    """The observation layout of a task: one entry per column, in order."""
+
+    names: tuple[str, ...]
+    units: tuple[str, ...]
+    high: tuple[float, ...]  # the bound is symmetric: low = -high
+
+    def space(self) -> gym.spaces.Box:
+        """The float32 Box of the observations, ``[-high, high]``."""
+        high = np.array(self.high, dtype=np.float32)
+        return gym.spaces.Box(-high, high, dtype=np.float32)
+
+    def index(self, name: str) -> int:
+        """The column of the observation called ``name``."""
+        return self.names.index(name)
+
+
+@dataclass(frozen=True)
+class Schedule:
+    """A per-step table (T + 1, ...) held for both carriers: as nested floats per step, and
+    time last (..., T + 1), so that gathering every env's step is one cache-friendly ``take``."""
+
+    floats: list
+    time_last: np.ndarray
+
+    @classmethod
+    def of(cls, table: np.ndarray) -> Schedule:
+        return cls(table.tolist(), np.ascontiguousarray(np.moveaxis(table, 0, -1)))
+
+
+def _rows_synced(schedule: Schedule, t: np.ndarray) -> np.ndarray:
+    return schedule.time_last[..., t[0] - 1, None]  # every env at the same step: a slice
+
+
+def _rows_gathered(schedule: Schedule, t: np.ndarray) -> np.ndarray:
+    return np.take(schedule.time_last, t - 1, axis=-1)
+
+
+@dataclass(frozen=True)
+class Carrier:
+    """The few operations whose spelling differs between floats and arrays.
+
+    ``where(cond, a, b)``, ``clip(x, lo, hi)``; ``at(schedule, t)``: the entries of a
+    :class:`Schedule` acting on the step t - 1 -> t; ``batched``: True for arrays, where a plant
+    core with two carriers of one arithmetic (``models``) picks its array one."""
+
+    batched: bool
+    where: Callable[[Any, Any, Any], Any]
+    clip: Callable[[Any, float, float], Any]
+    at: Callable[[Schedule, Any], Any]
+
+
+FLOATS = Carrier(
+    batched=False,
+    where=lambda cond, a, b: a if cond else b,
+    clip=lambda x, lo, hi: min(max(x, lo), hi),
+    at=lambda schedule, t: schedule.floats[t - 1],
+)
+_ARRAY_CLIP = lambda x, lo, hi: np.minimum(np.maximum(x, lo), hi)  # noqa: E731
+SYNCED = Carrier(batched=True, where=np.where, clip=_ARRAY_CLIP, at=_rows_synced)  # every env at one step
+GATHER = Carrier(batched=True, where=np.where, clip=_ARRAY_CLIP, at=_rows_gathered)
+
+
+@runtime_checkable
+class TrackingTask(Protocol):
+    """What the scalar env (:class:`~ssme_envs.envs.tracking_env.TrackingEnv`) and the vector env
+    (:class:`~ssme_envs.envs.vector.TrackingVectorEnv`) need of a task.
+
+    Episodes are drawn from ``draw_size`` uniform float32 numbers per episode (one generator call):
+    ``episodes`` turns them into references and unit sensor noise, (channels, T + 1, k) each.
+    ``step(state, action, t, ref, noise, ops)``: ``action``, ``ref`` and ``noise`` per channel
+    (floats, or rows of N envs; noise float64), ``t`` the step index after the step; returns
+    (state, observation values in the layout's order, reward, terminated).
+    """
+
+    observation: Observation
+    action_names: tuple[str, ...]
+    n_actions: int
+    n_channels: int
+    horizon: int
+    dt: float
+
+    @property
+    def draw_size(self) -> int: ...
+
+    @property
+    def shared_references(self) -> np.ndarray | None: ...
+
+    def episodes(
+        self, uniforms: np.ndarray, noise_out: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray]: ...
+
+    def initial_state(self, n: int | None = None) -> tuple: ...
+
+    def initial_observation(self, ref: np.ndarray, noise: np.ndarray) -> np.ndarray: ...
+
+    def step(
+        self, state: Any, action: Sequence[Value], t: Any, ref: Sequence[Value], noise: Sequence[Value],
+        ops: Carrier,
+    ) -> tuple[Any, Sequence[Value], Value, Any]: ...  # fmt: skip
+
+    def nonfinite_reward(self, t: Any) -> Any | None: ...
+
+    def render_row(self, state: Any, obs: Sequence[float], ref: Sequence[float]) -> list[float]: ...
+
+
+def set_columns(state: Any, fresh: Any, envs: np.ndarray) -> None:
+    """Write the columns (last axis) ``envs`` of every array of a nested state tuple."""
+    for block, new in zip(state, fresh, strict=True):
+        if isinstance(block, tuple):
+            set_columns(block, new, envs)
+        else:
+            block[..., envs] = new
+
+
+def check_number(name: str, value: Any, low: float, high: float, low_open: bool = False) -> float:
+    """``value`` as a float, or ValueError unless a finite number within [low, high] (or (low, high])."""
+    ok = isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
+    if not ok or value > high or value < low or (low_open and value == low):
+        bracket = "(" if low_open else "["
+        raise ValueError(f"{name} must be a number in {bracket}{low:g}, {high:g}], got {value!r}")
+    return float(value)
+
+
+__all__ = [
+    "FLOATS",
+    "GATHER",
+    "SYNCED",
+    "Carrier",
+    "Observation",
+    "Schedule",
+    "TrackingTask",
+    "check_number",
+    "set_columns",
+]

@@ -1,0 +1,122 @@
+"""The one state-space type of the package: a discrete linear model ``x+ = A x + B u``, ``y = C x + D u``.
+
+The identification results (:class:`~ssme_envs.models.statespace.AlphaCanonicalModel`,
+:class:`~ssme_envs.identification.subspace.InnovationsModel`) convert to it with
+``state_space()``, and the controllers' design models (:class:`agents.plants.LinearDesign`) hold
+one, so that a controller designed on any of them reads the same four matrices.
+"""
+
+from __future__ import annotations
+
+import numbers
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+
+def check_dt(dt: Any) -> float:
+    """A sample time as a float, or ValueError unless it is a positive finite number of seconds."""
+    if not (isinstance(dt, numbers.Real) and not isinstance(dt, bool) and np.isfinite(dt) and dt > 0):
+        raise ValueError(f"dt must be a positive number of seconds, got {dt!r}")
+    return float(dt)
+
+
+def as_matrix(value: Any, name: str, shape: tuple[int | None, int | None]) -> np.ndarray:
+    """``value`` as a finite float matrix of ``shape`` (None: any size); ValueError naming it."""
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name} must be a numeric matrix (list of rows): {exc}") from None
+    if arr.ndim != 2:
+        raise ValueError(f"{name} must be a matrix (list of rows), got {arr.ndim} dimension(s)")
+    for axis, want in enumerate(shape):
+        if want is not None and arr.shape[axis] != want:
+            raise ValueError(f"{name} has shape {arr.shape}, expected {shape[0] or 'n'} x {shape[1] or 'n'}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} contains NaN or inf")
+    return arr
+
+
+class Dimensions:
+    """Sizes and poles read off ``A``, ``B``, ``C``: shared by every class holding the matrices."""
+
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+
+    @property
+    def n_states(self) -> int:
+        return self.A.shape[0]
+
+    @property
+    def n_inputs(self) -> int:
+        return self.B.shape[1]
+
+    @property
+    def n_outputs(self) -> int:
+        return self.C.shape[0]
+
+    def poles(self) -> np.ndarray:
+        """Eigenvalues of ``A`` (discrete poles, dimensionless)."""
+        return np.linalg.eigvals(self.A)
+
+
+class PlantMatrices:
+    """``A``, ``B``, ``C`` and ``dt`` of a design's ``plant`` (a :class:`StateSpace`) under the names
+    the design methods read."""
+
+    plant: StateSpace
+
+    @property
+    def A(self) -> np.ndarray:
+        return self.plant.A
+
+    @property
+    def B(self) -> np.ndarray:
+        return self.plant.B
+
+    @property
+    def C(self) -> np.ndarray:
+        return self.plant.C
+
+    @property
+    def dt(self) -> float:
+        return self.plant.dt
+
+
+@dataclass(frozen=True)
+class StateSpace(Dimensions):
+    """A discrete linear model ``x(k+1) = A x + B u``, ``y = C x + D u``.
+
+    Parameters
+    ----------
+    A, B, C : ndarray
+        Shapes (n, n), (n, m), (p, n).
+    dt : float
+        Sample time, s.
+    D : ndarray, optional
+        Shape (p, m); zeros when left out (the engine's and the nozzle's models are strictly proper).
+    """
+
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    dt: float
+    D: np.ndarray = field(default=None)  # type: ignore[assignment]  # zeros, filled in below
+
+    def __post_init__(self) -> None:
+        a = as_matrix(self.A, "A", (None, None))
+        n = a.shape[0]
+        if a.shape[1] != n:
+            raise ValueError(f"A must be square, got shape {a.shape}")
+        b = as_matrix(self.B, "B", (n, None))
+        c = as_matrix(self.C, "C", (None, n))
+        d = np.zeros((c.shape[0], b.shape[1])) if self.D is None else self.D
+        d = as_matrix(d, "D", (c.shape[0], b.shape[1]))
+        for name, value in (("A", a), ("B", b), ("C", c), ("D", d)):
+            object.__setattr__(self, name, value)
+        object.__setattr__(self, "dt", check_dt(self.dt))
+
+
+__all__ = ["Dimensions", "PlantMatrices", "StateSpace", "as_matrix", "check_dt"]

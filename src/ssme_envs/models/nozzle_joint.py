@@ -1,0 +1,276 @@
+"""The nozzle joint: its parameters (Table 1 of the nozzle paper) and the RK4 arithmetic that
+integrates it, on floats (one nozzle) and on arrays (a batch) alike (see :mod:`ssme_envs.models.nozzle`)."""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import asdict, dataclass
+from functools import cache
+from importlib import resources
+from typing import Any, NamedTuple
+
+import numpy as np
+
+NOZZLE_DT = 0.008  # s, the paper's decimated sample time
+BENCH_RATE_HZ = 2500.0  # the bench acquisition rate
+DEFAULT_SUBSTEPS = 4  # RK4 steps per 0.008 s sample: 2 ms, about 1e-6 relative error (see tests)
+DEFAULT_TORQUE_LIMIT = 3.0e4  # N m, an assumption: about 4x the 7.5e3 N m of a static 3 deg deflection
+
+_DATA = resources.files("ssme_envs") / "models" / "data"
+
+
+@dataclass(frozen=True)
+class NozzleParameters:
+    """Bouc-Wen nozzle in the paper's (Table 1) form. ``a = 1`` gives the linear joint.
+
+    Attributes
+    ----------
+    J : kg m^2; b : N m s/rad; k : N m/rad
+        Inertia, damping and joint stiffness.
+    a : float
+        Ratio of post-yield to pre-yield stiffness (1: linear).
+    A, beta, gamma, n : float
+        Bouc-Wen shape parameters (dimensionless in this form; z has the units of x).
+    """
+
+    J: float
+    b: float
+    k: float
+    a: float = 1.0
+    A: float = 1.0
+    beta: float = 0.0
+    gamma: float = 0.0
+    n: float = 1.0
+
+    def __post_init__(self) -> None:
+        for name, value in asdict(self).items():
+            if isinstance(value, bool) or not isinstance(value, int | float) or not np.isfinite(value):
+                raise ValueError(f"nozzle parameter {name} must be a finite number, got {value!r}")
+        for name in ("J", "k", "A", "n"):
+            if getattr(self, name) <= 0:
+                raise ValueError(f"nozzle parameter {name} must be positive, got {getattr(self, name)}")
+        if self.b < 0:
+            raise ValueError(f"nozzle damping b must be >= 0, got {self.b}")
+        if not 0 <= self.a <= 1:
+            raise ValueError(f"nozzle parameter a must be in [0, 1], got {self.a}")
+        if self.beta + self.gamma < 0:
+            raise ValueError("beta + gamma must be >= 0 (otherwise z grows without bound)")
+        if self.gamma < 0:
+            # In this form gamma weighs sign(x' z): gamma < 0 makes unloading (x' z < 0) steeper
+            # than loading, and z then grows without bound on some bounded inputs (class III of
+            # Ikhouane, Manosa & Rodellar 2007, with their beta and gamma swapped).
+            raise ValueError(
+                f"nozzle parameter gamma must be >= 0, got {self.gamma} (with gamma < 0 the "
+                "hysteretic state z grows without bound on unloading)"
+            )
+        try:
+            norm = self.normalized()
+        except OverflowError:
+            norm = {"beta_n": math.inf}
+        for name, value in norm.items():
+            if not math.isfinite(value):
+                raise ValueError(
+                    f"nozzle parameter {name} = {value} of the normalized joint is not finite "
+                    f"(A^(n - 1) or (1 - a) k A overflows: A = {self.A}, n = {self.n}, k = {self.k})"
+                )
+
+    @classmethod
+    def linear(cls, J: float, b: float, k: float) -> NozzleParameters:
+        return cls(J=J, b=b, k=k)
+
+    @property
+    def is_linear(self) -> bool:
+        return self.a == 1.0
+
+    @property
+    def small_signal_stiffness(self) -> float:
+        """a k + (1 - a) k A, N m/rad."""
+        return self.a * self.k + (1.0 - self.a) * self.k * self.A
+
+    def normalized(self) -> dict[str, float]:
+        """The identifiable parameters (J, b, k_el, k_hys, beta_n, gamma_n, n)."""
+        scale = self.A ** (self.n - 1.0)
+        return {
+            "J": self.J,
+            "b": self.b,
+            "k_el": self.a * self.k,
+            "k_hys": (1.0 - self.a) * self.k * self.A,
+            "beta_n": self.beta * scale,
+            "gamma_n": self.gamma * scale,
+            "n": self.n,
+        }
+
+    @classmethod
+    def from_normalized(
+        cls, J: float, b: float, k_el: float, k_hys: float, beta_n: float, gamma_n: float, n: float, A: float
+    ) -> NozzleParameters:
+        """Table 1 form of normalized parameters under the stated normalization ``A``."""
+        k = k_el + k_hys / A
+        scale = A ** (1.0 - n)
+        return cls(J=J, b=b, k=k, a=k_el / k, A=A, beta=beta_n * scale, gamma=gamma_n * scale, n=n)
+
+    def to_dict(self) -> dict[str, float]:
+        return {key: float(value) for key, value in asdict(self).items()}
+
+
+@cache
+def _table1() -> dict[str, Any]:
+    return json.loads(_DATA.joinpath("nozzle_table1.json").read_text())
+
+
+def published_nozzle(which: str = "bouc_wen") -> NozzleParameters:
+    """Table 1 of the VLS nozzle paper: ``"bouc_wen"`` (nonlinear row) or ``"linear"``."""
+    table = _table1()
+    if which not in ("bouc_wen", "linear"):
+        raise ValueError(f"which must be 'bouc_wen' or 'linear', got {which!r}")
+    return NozzleParameters(**table[which])
+
+
+class RK4Parameters(NamedTuple):
+    """The normalized nozzle as the integrators use it: floats, or (N,) arrays per nozzle."""
+
+    inv_j: Any  # 1/J, 1/(kg m^2)
+    b_j: Any  # b/J, 1/s
+    k_el_j: Any  # k_el/J, 1/s^2
+    k_hys_j: Any  # k_hys/J, 1/s^2
+    beta: Any  # beta_n
+    gamma: Any  # gamma_n
+    n: Any
+    w_floor: Any  # floor of |w| in |w|^n, rad
+    hysteretic: bool
+
+
+def rk4_parameters(norm: dict[str, Any]) -> RK4Parameters:
+    """Integrator parameters from normalized ones (floats or arrays, keyed as
+    :meth:`NozzleParameters.normalized`)."""
+    inv_j = 1.0 / norm["J"]
+    return RK4Parameters(
+        inv_j=inv_j,
+        b_j=norm["b"] * inv_j,
+        k_el_j=norm["k_el"] * inv_j,
+        k_hys_j=norm["k_hys"] * inv_j,
+        beta=norm["beta_n"],
+        gamma=norm["gamma_n"],
+        n=norm["n"],
+        w_floor=np.maximum(1e-30 ** (1.0 / np.asarray(norm["n"])), 1e-300)[()].tolist()
+        if np.ndim(norm["n"]) == 0
+        else np.maximum(1e-30 ** (1.0 / norm["n"]), 1e-300),
+        hysteretic=bool(np.any(np.asarray(norm["k_hys"]) != 0)),
+    )
+
+
+# Two carriers of one arithmetic: rk4_floats for one nozzle on Python floats (no array
+# overhead), rk4_arrays for a batch in place. Both run the same IEEE operations in the same order
+# on every nozzle, so a nozzle gives the same bits alone and in a batch (tested). The power is
+# numpy's on both carriers (Python's pow differs from it in the last bit). In the Bouc-Wen law,
+# gamma sign(x' w) is written copysign(gamma, x' w), one operation: the same value wherever it
+# matters (at x' w = 0 either x' = 0 or |w|^n = 0 multiplies it away). |w| is floored where
+# |w|^n = 1e-30 (or at 1e-300): the power of an exact zero takes a slow path in numpy, and below
+# the floor 1 - c |w|^n is exactly 1 either way (for |c| = |beta +- gamma| < 1e13).
+
+
+def rk4_floats(
+    x: float, v: float, w: float, tau: float, h: float, steps: int, p: RK4Parameters
+) -> tuple[float, float, float]:
+    """``steps`` RK4 steps of length h (s) of one nozzle under the torque tau (N m), held.
+
+    x (rad), v (rad/s) and w (rad, normalized hysteresis) in, the same out."""
+    inv_j, b_j, k_el_j, k_hys_j, beta, gamma, n, floor, hys = p
+    accel0 = tau * inv_j
+    power, copysign = np.power, math.copysign
+    half, sixth = 0.5 * h, h / 6.0
+
+    # The Bouc-Wen rate v (1 - (beta + gamma sign(v w)) |w|^n) written out at each stage: a
+    # function call per stage would cost a tenth of the step.
+    for _ in range(steps):
+        a1 = accel0 - b_j * v - k_el_j * x - k_hys_j * w
+        w1 = v * (1.0 - (copysign(gamma, v * w) + beta) * float(power(max(abs(w), floor), n))) if hys else v
+        x2, v2, w2 = half * v + x, half * a1 + v, half * w1 + w
+        a2 = accel0 - b_j * v2 - k_el_j * x2 - k_hys_j * w2
+        w2_rate = (
+            v2 * (1.0 - (copysign(gamma, v2 * w2) + beta) * float(power(max(abs(w2), floor), n)))
+            if hys
+            else v2
+        )
+        x3, v3, w3 = half * v2 + x, half * a2 + v, half * w2_rate + w
+        a3 = accel0 - b_j * v3 - k_el_j * x3 - k_hys_j * w3
+        w3_rate = (
+            v3 * (1.0 - (copysign(gamma, v3 * w3) + beta) * float(power(max(abs(w3), floor), n)))
+            if hys
+            else v3
+        )
+        x4, v4, w4 = h * v3 + x, h * a3 + v, h * w3_rate + w
+        a4 = accel0 - b_j * v4 - k_el_j * x4 - k_hys_j * w4
+        w4_rate = (
+            v4 * (1.0 - (copysign(gamma, v4 * w4) + beta) * float(power(max(abs(w4), floor), n)))
+            if hys
+            else v4
+        )
+        x = sixth * ((v2 + v3) * 2.0 + v + v4) + x
+        v = sixth * ((a2 + a3) * 2.0 + a1 + a4) + v
+        w = sixth * ((w2_rate + w3_rate) * 2.0 + w1 + w4_rate) + w
+    return x, v, w
+
+
+def rk4_arrays(state: np.ndarray, tau: np.ndarray | float, h: float, steps: int, p: RK4Parameters) -> None:
+    """``steps`` RK4 steps of N nozzles in place: ``state`` (3, N) rows x (rad), v (rad/s), w
+    (rad), torques tau (N,) in N m held over the steps; the arithmetic of :func:`rk4_floats`."""
+    n = state.shape[1]
+    rates = np.empty((4, 3, n))  # the four RK4 stages' derivatives of (x, v, w)
+    stage = np.empty((3, n))
+    tmp, coef = np.empty((2, n))
+    accel0 = np.multiply(tau, p.inv_j)
+    half, sixth = 0.5 * h, h / 6.0
+    # row views made once: taking them costs about as much as an operation on a row
+    state_rows, stage_rows, rate_rows = tuple(state), tuple(stage), [tuple(r) for r in rates]
+
+    def derivative(rows: tuple, out: tuple) -> None:
+        x, v, w = rows
+        x_rate, accel, w_rate = out
+        np.copyto(x_rate, v)
+        np.multiply(p.b_j, v, out=tmp)
+        np.subtract(accel0, tmp, out=accel)
+        np.multiply(p.k_el_j, x, out=tmp)
+        accel -= tmp
+        np.multiply(p.k_hys_j, w, out=tmp)
+        accel -= tmp
+        if not p.hysteretic:
+            np.copyto(w_rate, v)
+            return
+        np.multiply(v, w, out=tmp)
+        np.copysign(p.gamma, tmp, out=coef)
+        np.add(coef, p.beta, out=coef)
+        np.abs(w, out=tmp)
+        np.maximum(tmp, p.w_floor, out=tmp)
+        np.power(tmp, p.n, out=tmp)
+        np.multiply(coef, tmp, out=coef)
+        np.subtract(1.0, coef, out=coef)
+        np.multiply(v, coef, out=w_rate)
+
+    for _ in range(steps):
+        for i, weight in enumerate((half, half, h)):
+            derivative(state_rows if i == 0 else stage_rows, rate_rows[i])
+            np.multiply(weight, rates[i], out=stage)
+            stage += state
+        derivative(stage_rows, rate_rows[3])
+        np.add(rates[1], rates[2], out=stage)
+        stage *= 2.0
+        stage += rates[0]
+        stage += rates[3]
+        stage *= sixth
+        state += stage
+
+
+__all__ = [
+    "BENCH_RATE_HZ",
+    "DEFAULT_SUBSTEPS",
+    "DEFAULT_TORQUE_LIMIT",
+    "NOZZLE_DT",
+    "NozzleParameters",
+    "RK4Parameters",
+    "published_nozzle",
+    "rk4_arrays",
+    "rk4_floats",
+    "rk4_parameters",
+]

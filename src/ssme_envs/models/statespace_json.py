@@ -1,0 +1,155 @@
+"""JSON of the engine models (schema ``ssme-envs/engine-model``) and the package's JSON helpers.
+
+:func:`dumps_compact` writes one matrix row per line (readable diffs, exact float round trip);
+:func:`read_json` names the file in every error. :class:`AlphaCanonicalModel`'s ``to_dict``,
+``from_dict``, ``save`` and ``load`` call the functions here.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from ssme_envs.models.uncertainty import ParameterUncertainty
+
+if TYPE_CHECKING:
+    from ssme_envs.models.statespace import AlphaCanonicalModel
+
+ENGINE_MODEL_SCHEMA = "ssme-envs/engine-model"
+# Version 2 added C = H [0 I] and the optional ``uncertainty`` block; version 1 files still load.
+ENGINE_MODEL_SCHEMA_VERSION = 2
+SUPPORTED_ENGINE_SCHEMA_VERSIONS = (1, 2)
+
+
+def engine_model_to_dict(model: AlphaCanonicalModel) -> dict[str, Any]:
+    """The JSON dictionary of an engine model (schema ssme-envs/engine-model, current version)."""
+    return {
+        "schema": ENGINE_MODEL_SCHEMA,
+        "schema_version": ENGINE_MODEL_SCHEMA_VERSION,
+        "dt": model.dt,
+        "A": model.A.tolist(),
+        "B": model.B.tolist(),
+        "C": model.C.tolist(),
+        "observability_indices": list(model.observability_indices),
+        "lambda": model.lam.tolist(),
+        "input_names": list(model.input_names),
+        "output_names": list(model.output_names),
+        "fit": model.fit,
+        **({"uncertainty": model.uncertainty.to_dict()} if model.uncertainty is not None else {}),
+    }
+
+
+def engine_model_from_dict(
+    cls: type[AlphaCanonicalModel], data: Any, source: str = "model"
+) -> AlphaCanonicalModel:
+    """Build a ``cls`` model from its JSON dictionary, checking everything a user file can get wrong
+    (ValueErrors naming ``source``)."""
+    if not isinstance(data, dict):
+        raise ValueError(f"{source}: expected a JSON object, got {type(data).__name__}")
+    schema = data.get("schema", ENGINE_MODEL_SCHEMA)
+    if schema != ENGINE_MODEL_SCHEMA:
+        raise ValueError(f"{source}: schema is {schema!r}, expected {ENGINE_MODEL_SCHEMA!r}")
+    version = data.get("schema_version", ENGINE_MODEL_SCHEMA_VERSION)
+    if version not in SUPPORTED_ENGINE_SCHEMA_VERSIONS:
+        raise ValueError(f"{source}: unsupported schema_version {version!r}")
+    missing = [k for k in ("dt", "A", "B", "C", "observability_indices", "lambda") if k not in data]
+    if missing:
+        raise ValueError(f"{source}: missing key(s) {', '.join(missing)}")
+    try:
+        m = len(data["B"][0])
+        p = len(data["C"])
+    except (TypeError, IndexError, KeyError):
+        raise ValueError(f"{source}: B and C must be non-empty lists of rows") from None
+    indices = data["observability_indices"]
+    if not isinstance(indices, list) or not all(isinstance(v, int) for v in indices):
+        raise ValueError(f"{source}: observability_indices must be a list of integers")
+    names = {}
+    for key, count, prefix in (("input_names", m, "u"), ("output_names", p, "y")):
+        value = data.get(key, [f"{prefix}{i}" for i in range(count)])
+        if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+            raise ValueError(f"{source}: {key} must be a list of strings")
+        names[key] = tuple(value)
+    fit = data.get("fit", {})
+    if not isinstance(fit, dict):
+        raise ValueError(f"{source}: fit must be an object")
+    try:
+        model = cls(
+            A=data["A"],
+            B=data["B"],
+            C=data["C"],
+            dt=data["dt"],
+            observability_indices=tuple(indices),
+            lam=data["lambda"],
+            fit=dict(fit),
+            **names,
+        )
+    except ValueError as exc:
+        raise ValueError(f"{source}: {exc}") from None
+    residual = model.alpha_canonical_residual()
+    if residual > 1e-9 * max(1.0, float(np.max(np.abs(model.A)))):
+        raise ValueError(
+            f"{source}: (A, C) is not in alpha-canonical form for observability indices "
+            f"{list(model.observability_indices)} (largest violation of eqs 5-8: {residual:.3g})"
+        )
+    if data.get("uncertainty") is not None:
+        model.uncertainty = ParameterUncertainty.from_dict(
+            data["uncertainty"], model.parameter_names(), source
+        )
+    return model
+
+
+def save_engine_model(model: AlphaCanonicalModel, path: str | Path) -> None:
+    """Write ``model`` as JSON at ``path``, atomically: a reader never sees half a model."""
+    from ssme_envs.outputs import write_text
+
+    write_text(path, dumps_compact(engine_model_to_dict(model)) + "\n")
+
+
+def read_json(path: str | Path) -> Any:
+    """Parse a JSON file; a missing file or bad JSON is a ValueError naming the file."""
+    path = Path(path)
+    try:
+        return json.loads(path.read_text())
+    except FileNotFoundError:
+        raise ValueError(f"{path}: no such file") from None
+    except (OSError, json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise ValueError(f"{path}: not valid JSON ({exc})") from None
+
+
+def dumps_compact(obj: Any) -> str:
+    """JSON with one matrix row per line: readable diffs, exact round trip of floats.
+
+    NaN and inf are refused (ValueError): they are not JSON.
+    """
+
+    def render(value: Any, indent: int) -> str:
+        pad = " " * indent
+        if isinstance(value, dict):
+            if not value:
+                return "{}"
+            items = [f"{pad} {json.dumps(k)}: {render(v, indent + 1)}" for k, v in value.items()]
+            return "{\n" + ",\n".join(items) + "\n" + pad + "}"
+        if isinstance(value, list) and value and all(isinstance(v, list) for v in value):
+            rows = [f"{pad} {json.dumps(v, allow_nan=False)}" for v in value]
+            return "[\n" + ",\n".join(rows) + "\n" + pad + "]"
+        if isinstance(value, list) and any(isinstance(v, dict) for v in value):
+            rows = [f"{pad} {render(v, indent + 1)}" for v in value]
+            return "[\n" + ",\n".join(rows) + "\n" + pad + "]"
+        return json.dumps(value, allow_nan=False)
+
+    return render(obj, 0)
+
+
+__all__ = [
+    "ENGINE_MODEL_SCHEMA",
+    "ENGINE_MODEL_SCHEMA_VERSION",
+    "SUPPORTED_ENGINE_SCHEMA_VERSIONS",
+    "dumps_compact",
+    "engine_model_from_dict",
+    "engine_model_to_dict",
+    "read_json",
+    "save_engine_model",
+]

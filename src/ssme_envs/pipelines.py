@@ -1,0 +1,165 @@
+"""Library functions for each arrow of the pipeline: identify, validate, evaluate, the main report.
+
+Each reads and checks its inputs first, then writes into a fresh directory beside ``out_dir``
+that is swapped in for it only when the function succeeds, under a lock that refuses a second
+concurrent run into the same directory (:func:`ssme_envs.outputs.run_directory`). Errors in what
+was given are ValueErrors naming the file or option; ``ssme-envs`` prints them as its one
+``error:`` line. ``progress`` (default: silent) receives a line when a long step starts.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import time
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+
+from ssme_envs.cli_checks import check_episodes
+from ssme_envs.evaluation_result import EvaluationResult
+from ssme_envs.identification.jobs import (  # the identification arrows, re-exported
+    EngineRun,
+    NozzleRun,
+    Progress,
+    _silent,
+    engine_embedded_into,
+    identify_engine,
+    identify_nozzle,
+    load_engine_model,
+    nozzle_into,
+    validate_engine,
+)
+from ssme_envs.outputs import output_directory
+
+
+def _factories(env_id: str, controllers: Sequence[str] | Mapping[str, Callable] | None,
+               allow_pickle: bool) -> dict[str, Callable]:  # fmt: skip
+    """Controller factories by name: given, or parsed from specs (default: every one for the env)."""
+    from agents import controller_names, parse_controller
+
+    if isinstance(controllers, Mapping):
+        return dict(controllers)
+    names = controller_names(env_id) if controllers is None else list(controllers)
+    return {name: parse_controller(name, env_id, allow_pickle) for name in names}
+
+
+def _evaluate_into(
+    work: Path,
+    env_id: str,
+    factories: Mapping[str, Callable],
+    scenarios: Sequence[str] | None,
+    episodes: int,
+    seed: int,
+    command: str,
+    progress: Progress,
+) -> EvaluationResult:
+    """Evaluate and write results.json, results.md and the plots into ``work``."""
+    from ssme_envs.evaluation import evaluate
+    from ssme_envs.results import write_evaluation
+
+    result = evaluate(env_id, factories, scenarios, episodes, seed, progress=progress)
+    write_evaluation(result, work, command)
+    return result
+
+
+def evaluate_to(
+    out_dir: str | Path,
+    env_id: str,
+    controllers: Sequence[str] | Mapping[str, Callable] | None = None,
+    scenarios: Sequence[str] | None = None,
+    episodes: int = 20,
+    seed: int = 0,
+    *,
+    allow_pickle: bool = False,
+    command: str | None = None,
+    progress: Progress = _silent,
+) -> EvaluationResult:
+    """Evaluate controllers on an env's scenarios; write results.json, results.md and plots.
+
+    Parameters
+    ----------
+    controllers : sequence of str or mapping, optional
+        Controller specs (``pi``, ``lqi:truth``, ``ppo:RUN_DIR``, ...) or factories by name
+        (default: every controller of the env).
+    scenarios : sequence of str, optional
+        Default: every scenario of the env.
+    episodes : int
+        Per scenario; checked against the free memory first.
+    command : str, optional
+        The command line quoted in results.md (default: this call's ``ssme-envs evaluate``).
+
+    Returns
+    -------
+    EvaluationResult
+    """
+    from ssme_envs.evaluation import check_env_id, check_scenarios, scenario_names
+
+    check_env_id(env_id)
+    names = scenario_names(env_id) if scenarios is None else check_scenarios(env_id, scenarios)
+    factories = _factories(env_id, controllers, allow_pickle)
+    check_episodes(episodes, {env_id: len(names) * len(factories)})
+    if command is None:
+        command = (f"ssme-envs evaluate --env {env_id} --controllers {','.join(factories)} --scenario "
+                   f"{','.join(names)} --episodes {episodes} --seed {seed} --out {out_dir}")  # fmt: skip
+    with output_directory(out_dir) as work:
+        return _evaluate_into(work, env_id, factories, scenarios, episodes, seed, command, progress)
+
+
+def report_plan(learned: bool | None = None) -> dict[str, tuple[list[str], list[str]]]:
+    """``{env_id: (controller specs, scenarios)}`` of the main report; the PPO policies only when
+    stable-baselines3 is installed (``learned`` None: find out)."""
+    from ssme_envs.main_report import REPORT_PLAN
+
+    if learned is None:
+        learned = importlib.util.find_spec("stable_baselines3") is not None
+    return {
+        env_id: ([s for s in specs.split(",") if learned or not s.startswith("ppo")], scenarios)
+        for env_id, (specs, scenarios) in REPORT_PLAN.items()
+    }
+
+
+def run_report(out_dir: str | Path, episodes: int = 20, progress: Progress = _silent) -> Path:
+    """The main job: identify the engine and the nozzle on their embedded experiments, evaluate the
+    controllers of each env on its scenarios, and write report.md (sub-reports in engine/,
+    nozzle/ and one folder per env) under ``out_dir``. Returns the report's path."""
+    from ssme_envs.main_report import write_main_report
+
+    out_dir = Path(out_dir)
+    learned = importlib.util.find_spec("stable_baselines3") is not None
+    plan = report_plan(learned)
+    check_episodes(episodes, {e: len(s) * len(c) for e, (c, s) in plan.items()})
+    start = time.perf_counter()
+    with output_directory(out_dir) as work:
+        progress("identifying the engine (embedded experiment, five power levels) ...")
+        engine_embedded_into(work / "engine", None, {})
+        progress("identifying the nozzle (bench test) ...")
+        nozzle_into(work / "nozzle", None, None, 2, None, None, progress)
+        if not learned:
+            progress("stable-baselines3 is not installed: the report leaves out the PPO policies "
+                     '(pip install ".[rl]")')  # fmt: skip
+        evaluations = {}
+        for env_id, (specs, scenarios) in plan.items():
+            folder = env_id.split("/")[-1]
+            command = (
+                f"ssme-envs evaluate --env {env_id} --controllers {','.join(specs)} --scenario "
+                f"{','.join(scenarios)} --episodes {episodes} --out {out_dir / folder}"
+            )
+            progress(f"evaluating on {env_id} ...")
+            factories = _factories(env_id, specs, False)
+            evaluations[env_id] = _evaluate_into(
+                work / folder, env_id, factories, scenarios, episodes, 0, command, progress
+            )
+        write_main_report(work, evaluations, episodes, time.perf_counter() - start, shown=out_dir)
+    return out_dir / "report.md"
+
+
+__all__ = [
+    "EngineRun",
+    "NozzleRun",
+    "evaluate_to",
+    "identify_engine",
+    "identify_nozzle",
+    "load_engine_model",
+    "report_plan",
+    "run_report",
+    "validate_engine",
+]
