@@ -20,6 +20,7 @@ from agents.pid import DecoupledPI, PlacedPID
 from agents.plants import DESIGN_SOURCES
 from agents.policy_files import ALGOS
 from agents.tvc import HysteresisCompensated
+from ssme_envs.envs.catalogue import ENVS
 
 TRACKING = "ssme_envs/EngineTracking-v0"
 THROTTLE = "ssme_envs/EngineThrottle-v0"
@@ -64,7 +65,7 @@ def _shipped_ppo(env: Any, design: str) -> Controller:
 
 # name -> (factory(env, design), the env ids it serves, the design model when none is named)
 CONTROLLERS: dict[str, tuple[Callable[[Any, str], Controller], tuple[str, ...], str]] = {
-    "zero": (ZeroAction, (TRACKING, THROTTLE, NOZZLE, LAUNCHER), "identified"),
+    "zero": (ZeroAction, tuple(ENVS), "identified"),  # the baseline of every env
     "pi": (DecoupledPI, (TRACKING, THROTTLE), "identified"),
     "lqi": (LQIServo, (TRACKING, NOZZLE, LAUNCHER), "identified"),
     "mpc": (MPC, (TRACKING,), "identified"),

@@ -49,19 +49,16 @@ def by_kind(table: Mapping[type, T], obj: Any, what: str) -> T:
 
 
 def env_id_of(env: Any) -> str:
-    """The registered id of an ssme-envs env, from the kind of its task."""
-    from ssme_envs.envs.engine_throttle import ThrottleTask
-    from ssme_envs.envs.engine_tracking import EngineTask
-    from ssme_envs.envs.launcher_pitch import LauncherTask
-    from ssme_envs.envs.nozzle_tvc import NozzleTask
+    """The registered id of an ssme-envs env: the catalogue entry of its task."""
+    from ssme_envs.envs.catalogue import entry_of_task
 
-    names = {
-        EngineTask: "EngineTracking",
-        ThrottleTask: "EngineThrottle",
-        NozzleTask: "NozzleTVC",
-        LauncherTask: "LauncherPitch",
-    }
-    return f"ssme_envs/{by_kind(names, task_of(env), 'env id')}-v0"
+    return entry_of_task(task_of(env)).id
+
+
+def columns(observation: Any, *names: str) -> tuple[int, ...]:
+    """The columns of the named observation entries in a task's layout
+    (:class:`~ssme_envs.envs.task.Observation`), so that no controller writes a column number."""
+    return tuple(observation.index(name) for name in names)
 
 
 @dataclass(frozen=True)
@@ -132,4 +129,4 @@ class BatchController:
         raise NotImplementedError
 
 
-__all__ = ["DEG", "BatchController", "Controller", "Ports", "by_kind", "env_id_of", "task_of"]
+__all__ = ["DEG", "BatchController", "Controller", "Ports", "by_kind", "columns", "env_id_of", "task_of"]

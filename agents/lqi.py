@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 import scipy.linalg
 
-from agents.base import BatchController
+from agents.base import BatchController, columns, task_of
 from agents.plants import LinearDesign, linear_design
 from ssme_envs.models.linear import PlantMatrices, StateSpace
 
@@ -228,6 +228,7 @@ class ScheduledLQI(BatchController):
         self.levels = np.array(levels, dtype=float)
         designs = [linear_design(env, design, power=level) for level in levels]
         self.design = designs[0]
+        (self.power_reference,) = columns(task_of(env).observation, "pc_ref_pct")
         servos = [design_servo(d, integral_ratio) for d in designs]
         self.first = servos[0]  # the shapes of the state
         self.tables = {
@@ -247,7 +248,7 @@ class ScheduledLQI(BatchController):
 
     def compute(self, obs: np.ndarray) -> np.ndarray:
         y, r = self.design.ports.read(obs)
-        servo = self.scheduled(100.0 + obs[:, 2])
+        servo = self.scheduled(100.0 + obs[:, self.power_reference])
         x = servo_estimate(servo, self.state, y)
         du = servo_feedback(servo, self.state, x, r, reference_step(self.state, r))
         return servo_advance(servo, self.state, x, y, r, du, self.design.input_limit) / (

@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from agents.base import DEG, BatchController, task_of
+from agents.base import DEG, BatchController, by_kind, columns, task_of
 from agents.plants import linear_design, second_order
 from ssme_envs.envs.launcher_pitch import LauncherTask
 from ssme_envs.envs.nozzle_tvc import NozzleTask
@@ -34,6 +34,7 @@ class DecoupledPI(BatchController):
     def __init__(self, env: Any, design: str = "identified") -> None:
         super().__init__()
         self.design = linear_design(env, design)
+        self.errors = columns(task_of(env).observation, "pc_err_pct", "mr_err_pct")
         d = self.design
         x = np.zeros((d.A.shape[0], 2))
         steps = []
@@ -49,7 +50,7 @@ class DecoupledPI(BatchController):
         return {"u": np.zeros((n, 2)), "e": np.zeros((n, 2))}
 
     def compute(self, obs: np.ndarray) -> np.ndarray:
-        e = obs[:, 4:6] / 100.0
+        e = obs[:, self.errors] / 100.0
         s, limit = self.state, self.design.input_limit
         s["u"] = np.clip(s["u"] + self.kc * (e - s["e"]) + self.ki * self.design.dt * e, -limit, limit)
         s["e"] = e
@@ -66,6 +67,11 @@ def placed_pid(
     return kp, omega**3 / g, kd
 
 
+# the closed-loop poles (rad/s) of each kind of task: the launcher's task, a nozzle task too, gets
+# its own along the class hierarchy
+OMEGA: dict[type, float] = {NozzleTask: 60.0, LauncherTask: 4.0}
+
+
 class PlacedPID(BatchController):
     """PID by pole placement on the second-order design model: the nozzle (torque -> angle, on the
     joint's small-signal stiffness, poles at 60 rad/s) or the launcher's rigid body (deflection
@@ -76,20 +82,19 @@ class PlacedPID(BatchController):
     def __init__(self, env: Any, design: str = "identified", omega: float | None = None) -> None:
         super().__init__()
         task = task_of(env)
-        if not isinstance(task, NozzleTask | LauncherTask):  # the launcher composes a nozzle task
-            raise TypeError(f"{self.name} is for NozzleTVC and LauncherPitch, not {type(task).__name__}")
         if omega is None:
-            omega = 4.0 if isinstance(task, LauncherTask) else 60.0
+            omega = by_kind(OMEGA, task, f"{self.name} design")
         if not (isinstance(omega, int | float) and omega > 0):
             raise ValueError(f"omega must be a positive number (rad/s), got {omega!r}")
         self.design = linear_design(env, design)
         self.kp, self.ki, self.kd = placed_pid(*second_order(task, design), omega)
+        self.error, self.rate = columns(task.observation, "err_deg", "rate_deg_s")
 
     def initial_state(self, n: int) -> dict[str, np.ndarray]:
         return {"integral": np.zeros(n)}
 
     def compute(self, obs: np.ndarray) -> np.ndarray:
-        e, rate = obs[:, 3] / DEG, obs[:, 1] / DEG
+        e, rate = obs[:, self.error] / DEG, obs[:, self.rate] / DEG
         s, limit = self.state, self.design.input_limit
         u = self.kp * e + self.ki * s["integral"] - self.kd * rate
         free = np.abs(u) < limit
@@ -97,4 +102,4 @@ class PlacedPID(BatchController):
         return (u / self.design.ports.input_scale)[:, None]
 
 
-__all__ = ["DecoupledPI", "PlacedPID", "placed_pid", "simc_pi"]
+__all__ = ["OMEGA", "DecoupledPI", "PlacedPID", "placed_pid", "simc_pi"]

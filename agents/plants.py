@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 import scipy.signal
 
-from agents.base import DEG, Ports, by_kind, task_of
+from agents.base import DEG, Ports, by_kind, columns, task_of
 from ssme_envs.envs.engine_throttle import ThrottleTask
 from ssme_envs.envs.engine_tracking import EngineTask
 from ssme_envs.envs.engine_tracking import design_model as engine_design_model
@@ -87,39 +87,54 @@ def second_order(task: NozzleTask, source: str) -> tuple[float, float, float]:
     return by_kind(SECOND_ORDER, task, "second-order model")(task, source)
 
 
-def _nozzle_design(task: NozzleTask, source: str, power: float | None) -> LinearDesign:
+# observation units per model unit: the models work in fractions and radians
+UNIT_SCALE = {"%": 100.0, "deg": DEG}
+
+
+def _ports(task: Any, outputs: tuple[str, ...], references: tuple[str, ...], input_scale: float,
+           sign: float = 1.0) -> Ports:  # fmt: skip
+    """Ports on the named columns of the task's observation layout, scaled by their unit."""
+    observation = task.observation
+    output_columns = columns(observation, *outputs)
+    (unit,) = {observation.units[i] for i in output_columns}
+    return Ports(output_columns, columns(observation, *references), sign * UNIT_SCALE[unit], input_scale)
+
+
+def _design(plant: StateSpace, task: Any, ports: Ports, follow_ramps: bool = True) -> LinearDesign:
+    """The design on ``plant`` read through ``ports``: the input limit is the action's full scale,
+    the noise and the reward's weights the task's, in model units."""
     return LinearDesign(
-        _oscillator(*second_order(task, source), task.dt), Ports((0,), (2,), DEG, task.torque_limit),
-        task.torque_limit, np.array([task.noise_std]), task.error_weight * DEG**2,
-        task.rate_weight / task.torque_limit**2,
+        plant, ports, ports.input_scale, np.array(task.noise_std, dtype=float, ndmin=1),
+        task.error_weight * ports.scale**2, task.rate_weight / ports.input_scale**2, follow_ramps,
     )  # fmt: skip
+
+
+def _nozzle_design(task: NozzleTask, source: str, power: float | None) -> LinearDesign:
+    ports = _ports(task, ("angle_deg",), ("ref_deg",), task.torque_limit)
+    return _design(_oscillator(*second_order(task, source), task.dt), task, ports)
 
 
 def _launcher_design(task: LauncherTask, source: str, power: float | None) -> LinearDesign:
-    return LinearDesign(
-        _oscillator(*second_order(task, source), task.dt), Ports((0,), (2,), DEG, task.max_deflection),
-        task.max_deflection, np.array([task.noise_std]), task.error_weight * DEG**2,
-        task.rate_weight / task.max_deflection**2,
-        # through the 15 Hz servo the ramp feedforward costs: attitude cost 2.17 -> 3.62
-        follow_ramps=False,
-    )  # fmt: skip
+    ports = _ports(task, ("attitude_deg",), ("ref_deg",), task.max_deflection)
+    # through the 15 Hz servo the ramp feedforward costs: attitude cost 2.17 -> 3.62
+    return _design(_oscillator(*second_order(task, source), task.dt), task, ports, follow_ramps=False)
 
 
-def _engine_plant(model: Any, task: EngineTask, ports: Ports) -> LinearDesign:
-    return LinearDesign(
-        StateSpace(model.A, model.B, model.C, model.dt), ports, task.action_scale, task.noise_std.copy(),
-        task.error_weight * 100.0**2, task.rate_weight / task.action_scale**2,
-    )  # fmt: skip
+def _engine_plant(model: Any) -> StateSpace:
+    return StateSpace(model.A, model.B, model.C, model.dt)
 
 
 def _engine_design(task: EngineTask, source: str, power: float | None) -> LinearDesign:
-    return _engine_plant(task.design_model(source), task, Ports((0, 1), (2, 3), 100.0, task.action_scale))
+    ports = _ports(task, ("pc_pct", "mr_pct"), ("pc_ref_pct", "mr_ref_pct"), task.action_scale)
+    return _design(_engine_plant(task.design_model(source)), task, ports)
 
 
 def _throttle_design(task: ThrottleTask, source: str, power: float | None) -> LinearDesign:
     model = engine_design_model(100.0 if power is None else float(power), source)
-    # throttle observations: y - y_eq(P) is minus the error, and the reference is 0
-    return _engine_plant(model, task, Ports((4, 5), (), -100.0, task.action_scale))
+    # the design model is about the operating point y_eq(P): its output y - y_eq(P) is minus the
+    # observed error, and its reference 0
+    ports = _ports(task, ("pc_err_pct", "mr_err_pct"), (), task.action_scale, sign=-1.0)
+    return _design(_engine_plant(model), task, ports)
 
 
 DESIGNS: dict[type, Callable[[Any, str, float | None], LinearDesign]] = {

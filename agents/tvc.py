@@ -6,7 +6,7 @@ from typing import Any
 
 import numpy as np
 
-from agents.base import DEG, BatchController, task_of
+from agents.base import BatchController, by_kind, task_of
 from agents.plants import nozzle_joint
 from ssme_envs.envs.launcher_pitch import LauncherTask
 from ssme_envs.envs.nozzle_tvc import NozzleTask
@@ -34,6 +34,11 @@ def hysteresis_along(
     return w
 
 
+# whether the action is the nozzle joint's torque (the launcher's task composes a nozzle task, but
+# its action is a deflection command to a servo)
+TORQUE_LOOP: dict[type, bool] = {NozzleTask: True, LauncherTask: False}
+
+
 class HysteresisCompensated(BatchController):
     """A nozzle loop (``base``, designed on the joint's linear stiffness) plus the torque the
     linear design leaves out: the joint's restoring torque is ``k_el x + k_hys w`` where the
@@ -46,7 +51,7 @@ class HysteresisCompensated(BatchController):
     def __init__(self, env: Any, base: BatchController, design: str = "identified") -> None:
         super().__init__()
         task = task_of(env)
-        if not isinstance(task, NozzleTask) or isinstance(task, LauncherTask):
+        if not by_kind(TORQUE_LOOP, task, self.name):
             raise TypeError(f"{self.name} compensates the NozzleTVC torque loop, not {type(task).__name__}")
         joint = nozzle_joint(task, design)
         norm = joint.normalized()
@@ -64,7 +69,7 @@ class HysteresisCompensated(BatchController):
         super().reset(seed, num_envs, envs)
 
     def compute(self, obs: np.ndarray) -> np.ndarray:
-        r = obs[:, 2] / DEG
+        r = self.design.ports.read(obs)[1][:, 0]  # the reference, rad
         s = self.state
         s["w"] = hysteresis_along(s["w"], s["r"], r, *self.shape)
         s["r"] = r

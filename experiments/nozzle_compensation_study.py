@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from agents.base import DEG, task_of
+from agents.base import task_of
 from agents.lqi import LQIServo
 from agents.plants import nozzle_joint
 from agents.tvc import HysteresisCompensated
@@ -45,7 +45,7 @@ class RateFeedforward(LQIServo):
         self.damping, self.dt = nozzle_joint(task, "identified").b, task.dt
 
     def compute(self, obs: np.ndarray) -> np.ndarray:
-        r = obs[:, 2] / DEG
+        r = self.design.ports.read(obs)[1][:, 0]  # the reference, rad
         previous = self.state["r"][:, 0]  # the servo's last reference (NaN before the first)
         torque = self.damping * (r - np.where(np.isnan(previous), r, previous)) / self.dt
         return super().compute(obs) + (torque / self.design.ports.input_scale)[:, None]

@@ -20,6 +20,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 import ssme_envs  # noqa: F401
+from agents.base import columns
 from ssme_envs.models.engine import POWER_LEVELS
 from ssme_envs.models.linked import POWER_RANGE, LinkedEngineModel
 
@@ -30,10 +31,11 @@ def main() -> None:
     env = gym.make("ssme_envs/EngineThrottle-v0", truth={"sensor_noise": 0.0})
     env.reset(seed=0)
     task = env.unwrapped.task
+    shown = columns(task.observation, "pc_pct", "mr_pct", "pc_ref_pct", "mr_ref_pct")
     rows = []
     for _ in range(task.horizon):
         obs, *_ = env.step(np.zeros(2, np.float32))
-        rows.append([*obs[:4], *task.valve_positions(env.unwrapped._state[0])])
+        rows.append([*obs[list(shown)], *task.valve_positions(env.unwrapped._state[0])])
     rows = np.array(rows)
     t = np.arange(1, task.horizon + 1) * task.dt
     linked = LinkedEngineModel()

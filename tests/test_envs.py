@@ -295,5 +295,6 @@ def test_sb3_trains_on_the_native_vector_env():
 def test_bench_command_prints_ratios(capsys):
     assert main(["bench", "--rounds", "1", "--sizes", "2", "--env", TRACKING]) == 0
     out = capsys.readouterr().out
-    assert "Pendulum-v1" in out and "CartPole-v1 vector" in out and out.count("x |") == 2
+    # one single and one vector row for each of the zero and the random actions
+    assert "Pendulum-v1" in out and "CartPole-v1 vector" in out and out.count("x |") == 4
     assert main(["bench", "--sizes", "0"]) == 2

@@ -42,13 +42,10 @@ class ToyTask:
     def draw_size(self) -> int:
         return 2 * ((self.horizon + 2) // 2) + 1  # noise (an even count), then the reference
 
-    def episodes(self, uniforms: np.ndarray, noise_out: np.ndarray | None = None) -> tuple:
-        length, pairs = self.horizon + 1, self.draw_size - 1
-        noise = unit_normals(np.ascontiguousarray(uniforms[:pairs], dtype=np.float32))[:length][None]
-        if noise_out is not None:
-            noise_out[...] = noise
-            noise = noise_out
-        refs = np.repeat(uniforms[pairs:].astype(np.float64) - 0.5, length, axis=0)[None]
+    def episodes(self, uniforms: np.ndarray, start: int, stop: int) -> tuple:
+        pairs = self.draw_size - 1
+        noise = unit_normals(np.ascontiguousarray(uniforms[:pairs], dtype=np.float32))[start:stop][None]
+        refs = np.repeat(uniforms[pairs:].astype(np.float64) - 0.5, stop - start, axis=0)[None]
         return refs, noise
 
     def initial_state(self, n: int | None = None) -> ToyState:

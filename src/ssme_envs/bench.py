@@ -133,7 +133,7 @@ def run_benchmark(
     sizes: Sequence[int] = VECTOR_SIZES,
     rounds: int = 5,
     progress: Callable[[str], None] | None = None,
-    actions: Sequence[str] = ("zero",),
+    actions: Sequence[str] = ACTIONS,
 ) -> list[dict[str, float | str]]:
     """Rows {env, mode, actions, num_envs, steps_per_s, reference, reference_steps_per_s, ratio,
     floor_steps_per_s (vector rows; NaN for single), of_floor}; ``actions``: "zero" and/or

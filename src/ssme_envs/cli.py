@@ -27,6 +27,7 @@ from ssme_envs.cli_checks import (
     check_vector_sizes,
     error_line,
     one_line,
+    positive_integers,
     sigint_in_main_process,
 )
 from ssme_envs.cli_identify import identify_engine as _identify_engine
@@ -160,7 +161,7 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--sizes", default="1,64,1024,4096", help="vector sizes (default: %(default)s)")
     bench.add_argument(
         "--actions",
-        default="zero",
+        default="zero,random",
         help="action kinds, comma-separated: zero (episodes run to their limit), random (episodes "
         "end early, resets timed too) (default: %(default)s)",
     )
@@ -283,11 +284,9 @@ def _bench(args: argparse.Namespace) -> int:
     from ssme_envs.bench import ACTIONS, ENV_IDS, format_table, run_benchmark
 
     try:
-        sizes = [int(v) for v in args.sizes.split(",")]
-    except ValueError:
-        raise _UsageError(f"--sizes must be comma-separated positive integers, got {args.sizes!r}") from None
-    if any(n < 1 for n in sizes):
-        raise _UsageError(f"--sizes must be positive integers, got {args.sizes!r}")
+        sizes = list(positive_integers("--sizes", args.sizes))
+    except ValueError as exc:
+        raise _UsageError(str(exc)) from None
     if not 1 <= args.rounds <= 100:
         raise _UsageError(f"--rounds must be within 1-100, got {args.rounds}")
     env_ids = args.env or list(ENV_IDS)

@@ -122,24 +122,30 @@ def check_memory(option: str, count: int, bytes_per_unit: float, what: str) -> N
 
 
 def env_shape(env_id: str) -> tuple[int, int, int]:
-    """Observation size, action size and episode steps (its registered limit) of an env."""
-    import gymnasium as gym
+    """Observation size, action size and episode steps (its registered limit) of an env, from
+    its catalogue entry."""
+    from ssme_envs.envs.catalogue import spec
+    from ssme_envs.evaluation import check_env_id
 
-    from ssme_envs.evaluation import make_env, scenario_names
-
-    env = make_env(env_id, scenario_names(env_id)[0], 1)
-    try:
-        obs = math.prod(env.single_observation_space.shape)
-        act = math.prod(env.single_action_space.shape)
-    finally:
-        env.close()
-    return obs, act, int(gym.spec(env_id).max_episode_steps or 1000)
+    entry = spec(check_env_id(env_id))
+    return len(entry.observation.names), len(entry.action_names), entry.max_episode_steps
 
 
 def evaluation_bytes(env_id: str, pairs: int) -> float:
     """Estimated bytes per episode of evaluating ``pairs`` (scenario, controller) pairs of an env."""
     obs, act, steps = env_shape(env_id)
     return steps * (8 * (obs + 2 * act + 2) * (pairs + TRANSIENT_COPIES) + ENV_BYTES_PER_STEP)
+
+
+def positive_integers(option: str, text: str) -> tuple[int, ...]:
+    """The value of an option of comma-separated positive integers; ValueError naming it."""
+    try:
+        values = tuple(int(v) for v in text.split(","))
+    except ValueError:
+        raise ValueError(f"{option} must be comma-separated positive integers, got {text!r}") from None
+    if any(v < 1 for v in values):
+        raise ValueError(f"{option} must be positive integers, got {text!r}")
+    return values
 
 
 def check_episodes(episodes: int, plan: dict[str, int]) -> None:

@@ -15,7 +15,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-from ssme_envs.cli_checks import check_finite, check_seed, check_workers
+from ssme_envs.cli_checks import check_finite, check_seed, check_workers, positive_integers
 from ssme_envs.outputs import holds_run
 
 
@@ -29,13 +29,7 @@ def names(text: str, option: str) -> tuple[str, ...]:
 
 def indices(text: str) -> tuple[int, ...]:
     """``--indices``: comma-separated positive integers."""
-    try:
-        values = tuple(int(v) for v in text.split(","))
-    except ValueError:
-        raise ValueError(f"--indices must be comma-separated positive integers, got {text!r}") from None
-    if any(v < 1 for v in values):
-        raise ValueError(f"--indices must be positive integers, got {text!r}")
-    return values
+    return positive_integers("--indices", text)
 
 
 @contextmanager

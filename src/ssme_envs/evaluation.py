@@ -7,8 +7,9 @@ episodes run together in the env's native vector env, each one counted until its
 
 from __future__ import annotations
 
+import functools
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -72,19 +73,49 @@ class Layout:
     actuators: tuple[str, ...]
 
 
-ENGINE = Layout(("Pc", "MR"), "%", (0, 1), (2, 3), (4, 5), ("OPOV", "FPOV"))
-LAYOUTS = {
-    "ssme_envs/EngineTracking-v0": ENGINE,
-    "ssme_envs/EngineThrottle-v0": ENGINE,
-    "ssme_envs/NozzleTVC-v0": Layout(("angle",), "deg", (0,), (2,), (3,), ("torque",)),
-    "ssme_envs/LauncherPitch-v0": Layout(("attitude",), "deg", (0,), (2,), (3,), ("deflection",)),
+# label in the metrics -> the observation entries (output, reference, error) of each tracked
+# output; their columns and unit, and the actuators' names, are read from the catalogue
+_ENGINE_OUTPUTS = {"Pc": ("pc_pct", "pc_ref_pct", "pc_err_pct"), "MR": ("mr_pct", "mr_ref_pct", "mr_err_pct")}
+TRACKED: dict[str, dict[str, tuple[str, str, str]]] = {
+    "ssme_envs/EngineTracking-v0": _ENGINE_OUTPUTS,
+    "ssme_envs/EngineThrottle-v0": _ENGINE_OUTPUTS,
+    "ssme_envs/NozzleTVC-v0": {"angle": ("angle_deg", "ref_deg", "err_deg")},
+    "ssme_envs/LauncherPitch-v0": {"attitude": ("attitude_deg", "ref_deg", "err_deg")},
 }
 
 
+@functools.cache
 def layout_of(env_id: str) -> Layout:
-    """The observation layout of ``env_id``: the one place evaluation, results and reports look
-    it up (when the envs publish their layouts, this is where to read them from)."""
-    return LAYOUTS[check_env_id(env_id)]
+    """The observation layout of ``env_id`` from its catalogue entry: the one place evaluation,
+    results and reports look it up."""
+    from ssme_envs.envs.catalogue import spec
+
+    entry, tracked = spec(check_env_id(env_id)), TRACKED[env_id]
+    observation = entry.observation
+    output, reference, error = (
+        tuple(observation.index(names[k]) for names in tracked.values()) for k in range(3)
+    )
+    (unit,) = {observation.units[i] for i in output}
+    return Layout(tuple(tracked), unit, output, reference, error, tuple(entry.action_names))
+
+
+class _Layouts(Mapping[str, Layout]):
+    """The layout of each env of :data:`SCENARIOS`, read on first use (reading them imports every
+    env's task module, which ``import ssme_envs.evaluation`` leaves to the first evaluation)."""
+
+    def __getitem__(self, env_id: str) -> Layout:
+        if env_id not in SCENARIOS:
+            raise KeyError(env_id)
+        return layout_of(env_id)
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(SCENARIOS)
+
+    def __len__(self) -> int:
+        return len(SCENARIOS)
+
+
+LAYOUTS: Mapping[str, Layout] = _Layouts()
 
 
 def scenario_names(env_id: str) -> list[str]:
@@ -320,6 +351,7 @@ def evaluate(
 __all__ = [
     "LAYOUTS",
     "SCENARIOS",
+    "TRACKED",
     "ActuatorMetrics",
     "ControllerMetrics",
     "EvaluationResult",

@@ -105,16 +105,19 @@ def evaluate_to(
 
 
 def report_plan(learned: bool | None = None) -> dict[str, tuple[list[str], list[str]]]:
-    """``{env_id: (controller specs, scenarios)}`` of the main report; the PPO policies only when
-    stable-baselines3 is installed (``learned`` None: find out)."""
+    """``{env_id: (controller specs, scenarios)}`` of the main report, every env of the catalogue in
+    its order; the PPO policies only when stable-baselines3 is installed (``learned`` None: find
+    out)."""
+    from ssme_envs.envs.catalogue import ENVS
     from ssme_envs.main_report import REPORT_PLAN
 
     if learned is None:
         learned = importlib.util.find_spec("stable_baselines3") is not None
-    return {
-        env_id: ([s for s in specs.split(",") if learned or not s.startswith("ppo")], scenarios)
-        for env_id, (specs, scenarios) in REPORT_PLAN.items()
-    }
+    plan = {}
+    for env_id in ENVS:  # every env has its plan (tests/test_catalogue_readers.py)
+        specs, scenarios = REPORT_PLAN[env_id]
+        plan[env_id] = ([s for s in specs.split(",") if learned or not s.startswith("ppo")], scenarios)
+    return plan
 
 
 def run_report(out_dir: str | Path, episodes: int = 20, progress: Progress = _silent) -> Path:

@@ -12,9 +12,9 @@ import numpy as np
 from ssme_envs.envs.references import (
     Fault,
     check_reference,
+    normal_rows,
     reference_signals,
     uniforms_needed,
-    unit_normals,
 )
 from ssme_envs.envs.task import Carrier, Observation, Schedule, Value
 from ssme_envs.models.engine import (
@@ -234,25 +234,25 @@ class EngineTask:
         """Uniform float32 numbers one episode consumes: sensor noise, then the reference's."""
         return 2 * (self.horizon + 1) + uniforms_needed(self.reference, self.horizon + 1, 2, self.dt)
 
-    def episodes(
-        self, uniforms: np.ndarray, noise_out: np.ndarray | None = None
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """References and sensor noise of k episodes from their uniform draws, float32 of shape
-        (draw_size, k), episode axis last: references (2, horizon + 1, k) float64 and unit noise
-        (2, horizon + 1, k) float32, scaled by ``noise_std`` at each step. One float32 call to
-        the generator per episode keeps resets cheap (the vector env resets thousands at once),
-        and an episode computed alone equals the same episode in a batch. ``noise_out``: an
-        array to write the noise into."""
-        length, k = self.horizon + 1, uniforms.shape[1]
-        uniforms = np.ascontiguousarray(uniforms, dtype=np.float32)
-        out = None if noise_out is None else noise_out.reshape(2 * length, k)
-        noise = unit_normals(uniforms[: 2 * length], out).reshape(2, length, k)
-        return self.references(uniforms[2 * length :]), noise
+    def episodes(self, uniforms: np.ndarray, start: int, stop: int) -> tuple[np.ndarray, np.ndarray]:
+        """The steps [start, stop) of k episodes from their uniform draws, float32 (draw_size, k),
+        episode axis last: references (2, stop - start, k) float64 and unit sensor noise (2,
+        stop - start, k) float32, scaled by ``noise_std`` at each step. One float32 call to the
+        generator per episode keeps the streams independent of how episodes are stepped; the
+        steps are computed as episodes reach them, so that a reset costs the same whatever the
+        episode's length. The noise of channel c, step s is row c (horizon + 1) + s of the
+        Box-Muller normals of the first 2 (horizon + 1) uniforms."""
+        length = self.horizon + 1
+        rows = [(c * length + start, c * length + stop) for c in (0, 1)]
+        noise = np.stack([normal_rows(uniforms, length, *block) for block in rows])
+        return self.references(uniforms[2 * length :], start, stop), noise
 
-    def references(self, uniforms: np.ndarray) -> np.ndarray:
-        """The references (2, horizon + 1, k) of k episodes from their uniforms (m, k)."""
+    def references(self, uniforms: np.ndarray, start: int, stop: int) -> np.ndarray:
+        """The references of k episodes from their uniforms (m, k): steps [start, stop), (2,
+        stop - start, k)."""
+        length = self.horizon + 1
         return reference_signals(
-            self.reference, uniforms.astype(np.float64), self.horizon + 1, self.amplitude, self.dt
+            self.reference, uniforms.astype(np.float64), length, self.amplitude, self.dt, start, stop
         )
 
     # The plant: point model with valves (this class) or the linked model (the throttle task).

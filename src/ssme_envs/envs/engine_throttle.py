@@ -135,9 +135,10 @@ class ThrottleTask(EngineTask):
     def shared_references(self) -> np.ndarray:
         return self.nominal_outputs
 
-    def references(self, uniforms: np.ndarray) -> np.ndarray:
-        """The profile's references for every episode, a read-only view (2, horizon + 1, k)."""
-        return np.broadcast_to(self.nominal_outputs.T[:, :, None], (2, self.horizon + 1, uniforms.shape[1]))
+    def references(self, uniforms: np.ndarray, start: int, stop: int) -> np.ndarray:
+        """The profile's references for every episode, a read-only view (2, stop - start, k)."""
+        rows = self.nominal_outputs[start:stop].T[:, :, None]
+        return np.broadcast_to(rows, (2, stop - start, uniforms.shape[1]))
 
     # Plant state: [x (n), linkage (m), valve (m)], starting at the schedule's equilibrium. The
     # command of step t - 1 -> t is absolute (the schedule at t - 1 plus the action, faults

@@ -171,11 +171,9 @@ class LauncherTask:
     def observation_space(cls) -> gym.spaces.Box:
         return cls.observation.space()
 
-    def episodes(
-        self, uniforms: np.ndarray, noise_out: np.ndarray | None = None
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """The nozzle task's episodes: attitude references (rad) and unit noise."""
-        return self.nozzle.episodes(uniforms, noise_out)
+    def episodes(self, uniforms: np.ndarray, start: int, stop: int) -> tuple[np.ndarray, np.ndarray]:
+        """The nozzle task's episodes: attitude references (rad) and unit noise of steps [start, stop)."""
+        return self.nozzle.episodes(uniforms, start, stop)
 
     def nonfinite_reward(self, t: Any) -> Any:
         """As the nozzle task's :meth:`~ssme_envs.envs.nozzle_task.NozzleTask.nonfinite_reward`."""

@@ -11,7 +11,7 @@ from typing import Any, ClassVar, NamedTuple
 import gymnasium as gym
 import numpy as np
 
-from ssme_envs.envs.references import Fault, check_reference, reference_signals, uniforms_needed, unit_normals
+from ssme_envs.envs.references import Fault, check_reference, normal_rows, reference_signals, uniforms_needed
 from ssme_envs.envs.task import SYNCED, Carrier, Observation, Value, check_number
 from ssme_envs.models.nozzle import (
     DEFAULT_TORQUE_LIMIT,
@@ -205,20 +205,15 @@ class NozzleTask:
         length = self.horizon + 1
         return length + length % 2 + uniforms_needed(self.reference, length, 1, self.dt)
 
-    def episodes(
-        self, uniforms: np.ndarray, noise_out: np.ndarray | None = None
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """References (1, horizon + 1, k) in rad and unit noise (1, horizon + 1, k) float32 of k
-        episodes from their uniforms (draw_size, k) float32, as for the engine tasks."""
+    def episodes(self, uniforms: np.ndarray, start: int, stop: int) -> tuple[np.ndarray, np.ndarray]:
+        """The steps [start, stop) of k episodes from their uniforms (draw_size, k) float32, as
+        for the engine tasks: references (1, stop - start, k) in rad and unit noise (1, stop -
+        start, k) float32, row s of the Box-Muller normals of the first draws."""
         length = self.horizon + 1
-        uniforms = np.ascontiguousarray(uniforms, dtype=np.float32)
         pairs = length + length % 2
-        noise = unit_normals(uniforms[:pairs])[:length][None]
-        if noise_out is not None:
-            noise_out[...] = noise
-            noise = noise_out
+        noise = normal_rows(uniforms, pairs // 2, start, stop)[None]
         refs = reference_signals(
-            self.reference, uniforms[pairs:].astype(np.float64), length, self.amplitude, self.dt
+            self.reference, uniforms[pairs:].astype(np.float64), length, self.amplitude, self.dt, start, stop
         )
         return refs, noise
 

@@ -1,7 +1,9 @@
 """Reference signals and fault specifications for the tracking environments.
 
-Every episode's reference is computed at reset from uniforms its env drew, so that the per-step
-cost is an index and the random streams do not depend on how the episode is stepped.
+Every episode's reference and sensor noise come from uniforms its env drew at reset, so that the
+random streams do not depend on how the episode is stepped. They are computed a prefix of the
+episode at a time, as the episode reaches it: every kind is causal (a step's value depends on
+the uniforms and the steps before it alone), so a prefix equals the same steps of the whole.
 """
 
 from __future__ import annotations
@@ -50,11 +52,20 @@ def _hold_count(length: int, dt: float) -> int:
 
 
 def reference_signals(
-    kind: str, uniforms: np.ndarray, length: int, amplitude: np.ndarray, dt: float
+    kind: str,
+    uniforms: np.ndarray,
+    length: int,
+    amplitude: np.ndarray,
+    dt: float,
+    start: int = 0,
+    stop: int | None = None,
 ) -> np.ndarray:
-    """References of k episodes, shape (channels, length, k), from uniforms in [0, 1) of shape
-    (:func:`uniforms_needed`, k), for deviations within +-amplitude per channel. The episode
-    axis is last, the layout in which the vector envs read one step of every env.
+    """References of k episodes of ``length`` steps, their steps [start, stop) (default: all),
+    shape (channels, stop - start, k), from uniforms in [0, 1) of shape (:func:`uniforms_needed`, k), for
+    deviations within +-amplitude per channel. The episode axis is last, the layout in which the
+    vector envs read one step of every env. Steps [start, stop) cost in proportion to ``stop``
+    (the steps before them are what a held or filtered level depends on) and equal the same
+    steps of the whole episode.
 
     Kinds
     -----
@@ -74,31 +85,32 @@ def reference_signals(
     the same episode drawn in a batch.
     """
     k, channels = uniforms.shape[1], amplitude.size
-    steps = np.arange(length)[:, None]
+    stop = length if stop is None else stop
+    steps = np.arange(start, stop)[:, None]
     scale = amplitude[:, None, None]
     if kind == "zero":
-        return np.zeros((channels, length, k))
+        return np.zeros((channels, stop - start, k))
     if kind == "mixed":
         choice = np.minimum((uniforms[0] * len(MIXED_KINDS)).astype(np.intp), len(MIXED_KINDS) - 1)
-        refs = np.empty((channels, length, k))
+        refs = np.empty((channels, stop - start, k))
         for index, each in enumerate(MIXED_KINDS):
             episodes = np.flatnonzero(choice == index)
             if episodes.size:
                 need = uniforms_needed(each, length, channels, dt)
                 picked = uniforms[1 : 1 + need][:, episodes]
-                refs[:, :, episodes] = reference_signals(each, picked, length, amplitude, dt)
+                refs[:, :, episodes] = reference_signals(each, picked, length, amplitude, dt, start, stop)
         return refs
     if kind == "sine_sweep":
-        time = np.arange(length) * dt
-        f0, f1, duration = 0.2, 5.0, max(time[-1], dt)
+        time = np.arange(start, stop) * dt
+        f0, f1, duration = 0.2, 5.0, max((length - 1) * dt, dt)  # the whole episode's sweep
         wave = np.sin(2.0 * np.pi * (f0 * time + (f1 - f0) * time**2 / (2.0 * duration)))
         level = (0.5 + 0.5 * uniforms) * amplitude[:, None]
         return wave[None, :, None] * level[:, None, :]
     if kind == "attitude":
-        held = reference_signals("random_steps", uniforms, length, amplitude, dt)
+        held = reference_signals("random_steps", uniforms, length, amplitude, dt, 0, stop)
         from scipy import signal  # here: importing it costs more than making an env
 
-        return signal.lfilter(*_attitude_filter(dt), held, axis=1)
+        return signal.lfilter(*_attitude_filter(dt), held, axis=1)[:, start:]
     if kind == "random_steps":
         count = _hold_count(length, dt)
         shortest, longest = round(1.0 / dt), round(3.0 / dt)
@@ -107,14 +119,14 @@ def reference_signals(
         ends = np.cumsum(holds, axis=0)
         # flat index of (hold, episode) at every step: episode i starts at i and moves on by k
         # at each new hold
-        index = np.zeros((length, k), dtype=np.intp)
+        index = np.zeros((stop, k), dtype=np.intp)
         index[0] = np.arange(k)
-        rows, cols = np.nonzero(ends < length)
+        rows, cols = np.nonzero(ends < stop)
         index[ends[rows, cols], cols] = k
         _accumulate_rows(index)
-        refs = np.empty((channels, length, k))
+        refs = np.empty((channels, stop - start, k))
         for c in range(channels):  # mode "clip" (indices are in range) writes without buffering
-            np.take(np.ascontiguousarray(levels[:, c]), index, out=refs[c], mode="clip")
+            np.take(np.ascontiguousarray(levels[:, c]), index[start:], out=refs[c], mode="clip")
         return refs
     if kind == "step":
         at = np.floor(uniforms[0] * max(1, int(0.4 * length)))
@@ -126,11 +138,12 @@ def reference_signals(
         level = (2.0 * uniforms[2:] - 1.0) * amplitude[:, None]
         return np.clip((steps - at) / span, 0.0, 1.0) * level[:, None, :]
     if kind == "prbs":
-        flips = (uniforms[: length * channels] < min(1.0, dt / 0.5)).reshape(channels, length, k)
-        start = np.where(uniforms[length * channels :] < 0.5, -1.0, 1.0)
+        flips = (uniforms[: length * channels] < min(1.0, dt / 0.5)).reshape(channels, length, k)[:, :stop]
+        flips = flips.copy()  # accumulated in place
+        first = np.where(uniforms[length * channels :] < 0.5, -1.0, 1.0)
         for c in range(channels):
             _accumulate_rows(flips[c], np.logical_xor)  # odd number of flips so far
-        return np.where(flips, -1.0, 1.0) * start[:, None, :] * scale
+        return np.where(flips[:, start:], -1.0, 1.0) * first[:, None, :] * scale
     raise ValueError(f"unknown reference kind {kind!r}; choose one of {', '.join(REFERENCE_KINDS)}")
 
 
@@ -210,25 +223,35 @@ class Fault:
         return fault
 
 
-def unit_normals(uniforms: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+def unit_normals(uniforms: np.ndarray) -> np.ndarray:
     """Standard normal float32 numbers from uniform float32 ones in [0, 1), by the Box-Muller
-    transform: an even number of rows, (2 r, ...) -> (2 r, ...), rows i and r + i paired;
-    ``out`` (same shape) to fill in place.
+    transform: an even number of rows, (2 r, ...) -> (2 r, ...), rows i and r + i paired."""
+    return normal_rows(uniforms, uniforms.shape[0] // 2, 0, uniforms.shape[0])
 
-    Elementwise float32 work: an env drawn alone gets the same bits as in a batch. Rows go in
-    chunks of about 32k numbers, so that a batch of thousands of episodes stays in cache.
-    """
-    half = uniforms.shape[0] // 2
-    normals = np.empty_like(uniforms) if out is None else out
-    chunk = max(1, 2**15 // max(1, uniforms[0].size))
-    for a in range(0, half, chunk):
-        first, second = slice(a, min(a + chunk, half)), slice(half + a, half + min(a + chunk, half))
-        radius = np.log1p(-uniforms[first])  # 1 - u in (0, 1]: the logarithm is finite
-        radius *= -2.0
-        np.sqrt(radius, out=radius)
-        angle = uniforms[second] * np.float32(2.0 * np.pi)
-        np.cos(angle, out=normals[first])
-        np.sin(angle, out=normals[second])
-        normals[first] *= radius
-        normals[second] *= radius
+
+def normal_rows(uniforms: np.ndarray, half: int, start: int, stop: int) -> np.ndarray:
+    """Rows [start, stop) of ``unit_normals(uniforms[: 2 half])``, (stop - start, ...) float32,
+    from the uniforms they pair alone: row i < half is ``R(u_i) cos(2 pi u_half+i)``, row
+    half + i is ``R(u_i) sin(2 pi u_half+i)``, ``R(u) = sqrt(-2 log(1 - u))``.
+
+    Elementwise float32 work on contiguous copies (numpy's SIMD loops then give every element
+    the same bits wherever it sits): an env drawn alone gets the same bits as in a batch, and a
+    block of rows the same bits as the whole."""
+    rows = []
+    if start < half:  # the cosine rows
+        rows.append(_box_muller(uniforms, half, start, min(stop, half), np.cos))
+    if stop > half:  # the sine rows
+        rows.append(_box_muller(uniforms, half, max(start, half) - half, stop - half, np.sin))
+    return rows[0] if len(rows) == 1 else np.concatenate(rows)
+
+
+def _box_muller(uniforms: np.ndarray, half: int, start: int, stop: int, wave: np.ufunc) -> np.ndarray:
+    """``R(u_i) wave(2 pi u_half+i)`` for the pairs i in [start, stop)."""
+    radius = np.log1p(-np.ascontiguousarray(uniforms[start:stop], dtype=np.float32))  # 1 - u in (0, 1]
+    radius *= -2.0
+    np.sqrt(radius, out=radius)
+    angular = np.ascontiguousarray(uniforms[half + start : half + stop], dtype=np.float32)
+    angle = angular * np.float32(2.0 * np.pi)  # a new array: the uniforms may be the caller's
+    normals = wave(angle, out=angle)
+    normals *= radius
     return normals

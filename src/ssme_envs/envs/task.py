@@ -88,8 +88,11 @@ class TrackingTask(Protocol):
     """What the scalar env (:class:`~ssme_envs.envs.tracking_env.TrackingEnv`) and the vector env
     (:class:`~ssme_envs.envs.vector.TrackingVectorEnv`) need of a task.
 
-    Episodes are drawn from ``draw_size`` uniform float32 numbers per episode (one generator call):
-    ``episodes`` turns them into references and unit sensor noise, (channels, T + 1, k) each.
+    Episodes are drawn from ``draw_size`` uniform float32 numbers per episode (one generator call
+    at reset): ``episodes(uniforms, start, stop)`` turns them (draw_size, k) into the references
+    and unit sensor noise of steps [start, stop), (channels, stop - start, k) each, equal to the
+    same steps of the whole episode. The envs ask for the steps as episodes reach them
+    (:func:`next_stop`), so that a reset costs the same whatever the episode's length.
     ``step(state, action, t, ref, noise, ops)``: ``action``, ``ref`` and ``noise`` per channel
     (floats, or rows of N envs; noise float64), ``t`` the step index after the step; returns
     (state, observation values in the layout's order, reward, terminated).
@@ -108,9 +111,7 @@ class TrackingTask(Protocol):
     @property
     def shared_references(self) -> np.ndarray | None: ...
 
-    def episodes(
-        self, uniforms: np.ndarray, noise_out: np.ndarray | None = None
-    ) -> tuple[np.ndarray, np.ndarray]: ...
+    def episodes(self, uniforms: np.ndarray, start: int, stop: int) -> tuple[np.ndarray, np.ndarray]: ...
 
     def initial_state(self, n: int | None = None) -> tuple: ...
 
@@ -124,6 +125,16 @@ class TrackingTask(Protocol):
     def nonfinite_reward(self, t: Any) -> Any | None: ...
 
     def render_row(self, state: Any, obs: Sequence[float], ref: Sequence[float]) -> list[float]: ...
+
+
+FIRST_STEPS = 16  # steps of an episode computed at its reset (early in training, most end sooner)
+
+
+def next_stop(ready: int, length: int) -> int:
+    """Where the next block of an episode ends when its first ``ready`` steps are computed: the
+    first FIRST_STEPS, then doubling (a whole episode costs at most twice its references, the
+    prefix of which each block recomputes), up to the episode's ``length`` steps."""
+    return min(length, max(FIRST_STEPS, 2 * ready))
 
 
 def set_columns(state: Any, fresh: Any, envs: np.ndarray) -> None:
@@ -145,6 +156,7 @@ def check_number(name: str, value: Any, low: float, high: float, low_open: bool 
 
 
 __all__ = [
+    "FIRST_STEPS",
     "FLOATS",
     "GATHER",
     "SYNCED",
@@ -153,5 +165,6 @@ __all__ = [
     "Schedule",
     "TrackingTask",
     "check_number",
+    "next_stop",
     "set_columns",
 ]

@@ -11,7 +11,7 @@ import gymnasium as gym
 import numpy as np
 
 from ssme_envs.envs.rendering import close_figure, render_history
-from ssme_envs.envs.task import FLOATS
+from ssme_envs.envs.task import FLOATS, next_stop
 
 
 class EpisodeOverError(gym.error.ResetNeeded, ValueError, AssertionError):
@@ -105,13 +105,14 @@ class TrackingEnv(gym.Env):
         gym.Env.reset(self, seed=seed)
         self._ended = ""
         task = self.task
-        uniforms = self.np_random.random(task.draw_size, dtype=np.float32)
-        refs, noise = task.episodes(uniforms[:, None])
+        self._uniforms = self.np_random.random(task.draw_size, dtype=np.float32)[:, None]
+        # per step, per channel, as floats (the float carrier's operands), the steps the episode
+        # has reached so far
+        self._refs: list[list[float]] = []
+        self._noise: list[list[float]] = []
+        refs, noise = self._extend()
         obs = task.initial_observation(refs[:, 0], noise[:, 0])[:, 0]
         obs = np.clip(obs, self._low, self._high)
-        # per step, per channel, as floats: the float carrier's operands
-        self._refs = refs[:, :, 0].T.tolist()
-        self._noise = noise[:, :, 0].T.astype(np.float64).tolist()
         self._state = task.initial_state()
         self._t = 0
         if self.render_mode:
@@ -135,6 +136,8 @@ class TrackingEnv(gym.Env):
         self._check_running()
         values = [min(max(a, -1.0), 1.0) for a in values]
         t = self._t + 1
+        if t == len(self._noise):
+            self._extend()
         ref = self._refs[t]
         self._state, obs, reward, terminated = task.step(self._state, values, t, ref, self._noise[t], FLOATS)
         self._t = t
@@ -153,6 +156,15 @@ class TrackingEnv(gym.Env):
         terminated, truncated = bool(terminated), t >= task.horizon
         self._ended = "terminated" if terminated else "truncated" if truncated else ""
         return out, float(reward), terminated, truncated, info
+
+    def _extend(self) -> tuple[np.ndarray, np.ndarray]:
+        """Compute the episode's next block of steps (``next_stop``) as the vector env does;
+        its references and noise (channels, steps, 1)."""
+        start = len(self._noise)
+        refs, noise = self.task.episodes(self._uniforms, start, next_stop(start, self.task.horizon + 1))
+        self._refs += refs[:, :, 0].T.tolist()
+        self._noise += noise[:, :, 0].T.astype(np.float64).tolist()
+        return refs, noise
 
     def _check_running(self) -> None:
         """Refuse a step outside an episode (after its end, or before the first reset)."""

@@ -29,7 +29,7 @@ from ssme_envs.envs.engine_throttle import ThrottleTask
 from ssme_envs.envs.launcher_pitch import LauncherTask
 from ssme_envs.envs.nozzle_task import NozzleTask
 from ssme_envs.envs.sub_env import SubEnv
-from ssme_envs.envs.task import GATHER, SYNCED, set_columns
+from ssme_envs.envs.task import GATHER, SYNCED, next_stop, set_columns
 from ssme_envs.envs.tracking_env import EpisodeOverError, check_reset_options
 
 RESET_OPTIONS = {"reset_mask": "a numpy bool array of shape (num_envs,), at least one True"}
@@ -119,9 +119,12 @@ class TrackingVectorEnv(VectorEnv):
         self._shared_refs = None if shared is None else np.ascontiguousarray(shared.T)  # (channels, T + 1)
         self._refs = None if shared is not None else np.zeros((channels, length, n))
         self._noise = np.zeros((channels, length, n), dtype=np.float32)  # unit draws, scaled at each step
-        # Buffers reused from episode to episode: fresh tens of MB would cost page faults.
+        # Each sub-env's episode draws, a row each (its generator fills it in place), and how many
+        # of its steps are computed into the tables: they are as the episode reaches them.
         self._draws = np.empty((n, self.task.draw_size), dtype=np.float32)
-        self._uniforms = np.empty((self.task.draw_size, n), dtype=np.float32)
+        self._draw_rows = list(self._draws)  # views made once: a reset draws into them by the thousand
+        self._uniforms = np.empty((self.task.draw_size, n), dtype=np.float32)  # _draws transposed
+        self._ready = np.zeros(n, dtype=np.int64)
         self._t = np.zeros(n, dtype=np.int64)
         self._synced = True  # every env at the same step: reads are slices, not gathers
         self._rows = np.arange(n)
@@ -163,26 +166,50 @@ class TrackingVectorEnv(VectorEnv):
     def _restart(self, envs: np.ndarray) -> np.ndarray:
         """Zero the state of the given envs and draw their next episodes; their first observations."""
         task, k = self.task, len(envs)
-        every = k == self.num_envs
-        if every:
+        if k == self.num_envs:
             self._state = task.initial_state(k)
         else:
             set_columns(self._state, task.initial_state(k), envs)
-        draws = self._draws[:k]
-        for row, i in enumerate(envs):
-            self._rngs[i].random(out=draws[row], dtype=np.float32)
-        uniforms = _transpose(draws, self._uniforms if every else None)
-        refs, noise = task.episodes(uniforms, self._noise if every else None)
-        if every:
-            self._refs = None if self._refs is None else refs
-        else:
-            self._noise[:, :, envs] = noise
-            if self._refs is not None:
-                self._refs[:, :, envs] = refs
+        rngs, rows, single = self._rngs, self._draw_rows, np.float32
+        for i in envs.tolist():  # positional arguments: half the cost of the keywords per call
+            rngs[i].random(None, single, rows[i])
         self._t[envs] = 0
         self._synced = bool((self._t == self._t[0]).all())
+        self._ready[envs] = 0
+        refs, noise = self._compute(envs, 0)
         obs = task.initial_observation(refs[:, 0], noise[:, 0]).T
         return np.clip(obs, self._low, self._high)
+
+    def _extend(self, t: np.ndarray) -> None:
+        """Compute the next block of the episodes that reach their uncomputed steps at ``t``."""
+        late = np.flatnonzero(t >= self._ready)
+        starts = self._ready[late]
+        for start in np.unique(starts).tolist():  # one block per episode position (synced: one)
+            self._compute(late if starts[0] == starts[-1] else late[starts == start], start)
+
+    def _compute(self, envs: np.ndarray, start: int) -> tuple[np.ndarray, np.ndarray]:
+        """The references and noise of the next block (:func:`next_stop`) of the episodes
+        ``envs``, whose first ``start`` steps are computed, written into the tables; returned
+        (channels, steps, len(envs))."""
+        every = len(envs) == self.num_envs
+        if every:  # every episode at once (a reset of all, synced episodes): the whole of them in
+            # one go, from a tiled transpose, as one pass costs less than several blocks'
+            stop = self.task.horizon + 1
+            uniforms = _transpose(self._draws, self._uniforms)
+        else:
+            stop = next_stop(start, self.task.horizon + 1)
+            uniforms = np.take(self._draws, envs, axis=0).T
+        refs, noise = self.task.episodes(uniforms, start, stop)
+        if every:  # contiguous slices rather than a scatter
+            self._noise[:, start:stop] = noise
+            if self._refs is not None:
+                self._refs[:, start:stop] = refs
+        else:
+            self._noise[:, start:stop, envs] = noise
+            if self._refs is not None:
+                self._refs[:, start:stop, envs] = refs
+        self._ready[envs] = stop
+        return refs, noise
 
     def reset(
         self, *, seed: int | Sequence[int | None] | None = None, options: Mapping[str, Any] | None = None
@@ -256,6 +283,8 @@ class TrackingVectorEnv(VectorEnv):
         t = self._t
         t += 1
         np.minimum(t, task.horizon, out=t)  # an env past its end is restarted below
+        if (t >= self._ready).any():
+            self._extend(t)
         if self._synced:  # contiguous slices
             noise = self._noise[:, t[0]]
             refs = self._refs[:, t[0]] if self._refs is not None else self._shared_refs[:, t[0], None]
@@ -334,11 +363,10 @@ class TrackingVectorEnv(VectorEnv):
         return {"nonfinite": bad.copy(), "_nonfinite": bad}
 
 
-def _transpose(table: np.ndarray, out: np.ndarray | None = None, tile: int = 256) -> np.ndarray:
-    """A C-contiguous transpose copied tile by tile (into ``out`` if given): numpy's one-pass
-    copy of a transposed view strides through memory, several times slower on tens of MB."""
+def _transpose(table: np.ndarray, out: np.ndarray, tile: int = 256) -> np.ndarray:
+    """A C-contiguous transpose copied tile by tile into ``out``: numpy's one-pass copy of a
+    transposed view strides through memory, several times slower on tens of MB."""
     rows, cols = table.shape
-    out = np.empty((cols, rows), dtype=table.dtype) if out is None else out
     for i in range(0, rows, tile):
         for j in range(0, cols, tile):
             out[j : j + tile, i : i + tile] = table[i : i + tile, j : j + tile].T
