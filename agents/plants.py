@@ -54,7 +54,7 @@ def check_source(source: str) -> str:
 def nozzle_joint(task: NozzleTask, source: str) -> NozzleParameters:
     """The nozzle joint to design on: the identified model's (Bouc-Wen when identified, else
     linear), or the env's own plant."""
-    return identified_nozzle().plant() if check_source(source) == "identified" else task.plant
+    return identified_nozzle(task.design).plant() if check_source(source) == "identified" else task.plant
 
 
 def _oscillator(a1: float, a0: float, g: float, dt: float) -> StateSpace:

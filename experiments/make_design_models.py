@@ -2,7 +2,8 @@
 
 - engine_identified_<power>.json: the engine pipeline on the embedded PRBS experiment at the five
   Table I power levels, default seed;
-- nozzle_identified.json: the nozzle pipeline on the embedded bench test of Table 1's nozzle.
+- nozzle_identified.json: the nozzle pipeline on the embedded bench test of Table 1's nozzle;
+- nozzle_strong_identified.json: the same on the strong-hysteresis nozzle (the "strong" plant).
 
 The test suite regenerates them and checks that the packaged files are unchanged.
 
@@ -16,6 +17,7 @@ from pathlib import Path
 
 from ssme_envs.identification import nozzle_pipeline
 from ssme_envs.identification.pipeline import DEFAULT_SEED, run_default
+from ssme_envs.models.nozzle import IDENTIFIED_FILES
 
 DATA = Path(__file__).resolve().parents[1] / "src" / "ssme_envs" / "models" / "data"
 
@@ -30,9 +32,10 @@ def main() -> None:
             result.identified.model.save(path)
             print(f"wrote {path.name}: indices {list(result.identified.model.observability_indices)}")
     if args.only in (None, "nozzle"):
-        model = nozzle_pipeline.run_default()[0].model
-        model.save(DATA / "nozzle_identified.json")
-        print(f"wrote nozzle_identified.json: {model.fit['bouc_wen']['reason']}")
+        for truth, name in IDENTIFIED_FILES.items():
+            model = nozzle_pipeline.run_default(truth=truth)[0].model
+            model.save(DATA / name)
+            print(f"wrote {name}: {model.fit['bouc_wen']['reason']}")
 
 
 if __name__ == "__main__":

@@ -48,6 +48,9 @@ SCENARIOS: dict[str, dict[str, dict[str, Any]]] = {
         "random_steps": {},
         "linear_plant": {"plant": "linear"},  # Table 1's linear row: random steps, no hysteresis
         "sine_sweep_linear": {"reference": "sine_sweep", "plant": "linear"},
+        # the strong-hysteresis nozzle (yields within +-3 deg) and its small-signal linear joint
+        "sine_sweep_strong": {"reference": "sine_sweep", "plant": "strong"},
+        "sine_sweep_strong_linear": {"reference": "sine_sweep", "plant": "strong_linear"},
         "attitude_linear": {"reference": "attitude", "plant": "linear"},
         "gain_loss": {"fault": {"kind": "gain_loss", "time": 2.0, "magnitude": 0.5}},
     },

@@ -30,6 +30,8 @@ REPORT_PLAN: dict[str, tuple[str, list[str]]] = {
             "linear_plant",
             "sine_sweep_linear",
             "attitude_linear",
+            "sine_sweep_strong",
+            "sine_sweep_strong_linear",
         ],
     ),
     LAUNCHER: ("zero,pid,lqi", ["step", "attitude", "random_steps", "linear_nozzle"]),
@@ -132,6 +134,7 @@ LINEAR_TWINS = {
     "sine_sweep": "sine_sweep_linear",
     "attitude": "attitude_linear",
     "random_steps": "linear_plant",
+    "sine_sweep_strong": "sine_sweep_strong_linear",
 }
 
 

@@ -109,6 +109,7 @@ class LauncherTask:
     n_channels: ClassVar[int] = 1
 
     plant = _from_nozzle("plant", "The nozzle's joint (NozzleParameters).")
+    design = _from_nozzle("design", "The bench test whose identified nozzle model designs for it.")
     substeps = _from_nozzle("substeps", "Servo samples per attitude step.")
     horizon = _from_nozzle("horizon", "Steps per episode.")
     dt = _from_nozzle("dt", "The attitude step, s.")
@@ -137,8 +138,10 @@ class LauncherTask:
         instability: float = 3.0,
         effectiveness: float = 12.0,
     ) -> LauncherTask:
+        joint, design = resolve_nozzle(plant)
         nozzle = NozzleTask(
-            plant=resolve_nozzle(plant),
+            plant=joint,
+            design=design,
             substeps=SERVO_SUBSTEPS,
             **episode_options(
                 reference, reference_amplitude_deg, 5.0, sensor_noise, fault, episode_seconds, LAUNCHER_DT

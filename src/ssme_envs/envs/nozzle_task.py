@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, ClassVar, NamedTuple
@@ -27,6 +27,7 @@ from ssme_envs.models.nozzle import (
     rk4_arrays,
     rk4_floats,
     rk4_parameters,
+    strong_nozzle,
 )
 
 DEG = 180.0 / math.pi
@@ -65,23 +66,43 @@ def integrate(plant: Any, tau: Value, h: float, steps: int, p: RK4Parameters, op
     return rk4_floats(*plant, tau, h, steps, p)
 
 
-def resolve_nozzle(plant: str | Path | NozzleParameters | NozzleModel) -> NozzleParameters:
-    """The joint behind the env: ``"bouc_wen"`` (Table 1's hysteretic joint, the truth),
-    ``"linear"`` (Table 1's linear row), ``"identified"`` (the packaged model identified from
-    the bench test), a nozzle model.json path, or a parameter/model object."""
+def strong_linear_nozzle() -> NozzleParameters:
+    """The strong-hysteresis nozzle's small-signal linear joint (same J, b, stiffness at rest)."""
+    strong = strong_nozzle()
+    return NozzleParameters.linear(strong.J, strong.b, strong.small_signal_stiffness)
+
+
+# plant presets -> (the joint, the packaged identified model the controllers design on)
+PLANTS: dict[str, tuple[Callable[[], NozzleParameters], str]] = {
+    "bouc_wen": (lambda: published_nozzle("bouc_wen"), "table1"),
+    "linear": (lambda: published_nozzle("linear"), "table1"),
+    "identified": (lambda: identified_nozzle("table1").plant(), "table1"),
+    "strong": (strong_nozzle, "strong"),
+    "strong_linear": (strong_linear_nozzle, "strong"),
+    "strong_identified": (lambda: identified_nozzle("strong").plant(), "strong"),
+}
+
+
+def resolve_nozzle(plant: str | Path | NozzleParameters | NozzleModel) -> tuple[NozzleParameters, str]:
+    """The joint behind the env and the bench test whose identified model designs for it.
+
+    ``plant``: a preset of :data:`PLANTS` (``"bouc_wen"``: Table 1's hysteretic joint, the
+    truth; ``"linear"``: its linear row; ``"identified"``: the packaged model identified from its
+    bench test; ``"strong"``, ``"strong_linear"``, ``"strong_identified"``: the same for the
+    strong-hysteresis nozzle), a nozzle model.json path, or a parameter/model object (designed
+    for with Table 1's identified model).
+    """
     if isinstance(plant, NozzleParameters):
-        return plant
+        return plant, "table1"
     if isinstance(plant, NozzleModel):
-        return plant.plant()
-    if plant in ("bouc_wen", "linear"):
-        return published_nozzle(str(plant))
-    if plant == "identified":
-        return identified_nozzle().plant()
+        return plant.plant(), "table1"
+    if isinstance(plant, str) and plant in PLANTS:
+        joint, design = PLANTS[plant]
+        return joint(), design
     if isinstance(plant, str | Path) and str(plant).endswith(".json"):
-        return NozzleModel.load(plant).plant()
+        return NozzleModel.load(plant).plant(), "table1"
     raise ValueError(
-        "plant must be 'bouc_wen', 'linear', 'identified', a nozzle model.json path or a model, "
-        f"got {plant!r}"
+        f"plant must be one of {', '.join(PLANTS)}, a nozzle model.json path or a model, got {plant!r}"
     )
 
 
@@ -115,6 +136,7 @@ class NozzleTask:
     """Everything a nozzle tracking episode needs, shared by the scalar and the vector env."""
 
     plant: NozzleParameters
+    design: str  # the bench test whose identified model the controllers design on (IDENTIFIED_FILES)
     substeps: int
     horizon: int
     reference: str
@@ -152,7 +174,7 @@ class NozzleTask:
         rate_limit: float | None = None,
         substeps: int | None = None,
     ) -> NozzleTask:
-        params = resolve_nozzle(plant)
+        params, design = resolve_nozzle(plant)
         episode = episode_options(
             reference, reference_amplitude_deg, 3.0, sensor_noise, fault, episode_seconds, NOZZLE_DT
         )
@@ -170,6 +192,7 @@ class NozzleTask:
             check_stable_substeps(params, substeps, NOZZLE_DT, envelope, DEFAULT_TORQUE_LIMIT)
         return cls(
             plant=params,
+            design=design,
             substeps=substeps,
             **episode,
             lag_gain=1.0 if lag == 0 else -math.expm1(-NOZZLE_DT / lag),
@@ -289,4 +312,13 @@ class NozzleTask:
         return [obs[0] / DEG, ref[0], state.torque / self.torque_limit]
 
 
-__all__ = ["DEG", "NOZZLE_OBSERVATION", "NozzleState", "NozzleTask", "episode_options", "resolve_nozzle"]
+__all__ = [
+    "DEG",
+    "NOZZLE_OBSERVATION",
+    "PLANTS",
+    "NozzleState",
+    "NozzleTask",
+    "episode_options",
+    "resolve_nozzle",
+    "strong_linear_nozzle",
+]

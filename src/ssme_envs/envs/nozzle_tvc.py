@@ -72,7 +72,12 @@ class NozzleTVCEnv(TrackingEnv):
     with its ``_nonfinite`` mask, under ``final_info`` in SAME_STEP autoreset mode).
 
     ## Arguments
-    plant : "bouc_wen" (default), "linear", "identified", a nozzle model.json path or a model.
+    plant : "bouc_wen" (default: Table 1's joint), "linear" (its linear row), "identified" (the
+    packaged model identified from its bench test); "strong", "strong_linear",
+    "strong_identified": a nozzle of our own whose Bouc-Wen joint yields at about 1.7 deg, well
+    inside the +-3 deg range (not VLS data), its small-signal linear joint, and its packaged
+    identified model, which the controllers' "identified" designs then use; or a nozzle
+    model.json path or a model object.
     reference : "random_steps" (default), "step", "ramp", "prbs", "sine_sweep", "attitude",
     "zero", "mixed" (each episode one of random_steps, step, ramp, sine_sweep, attitude: for
     training); reference_amplitude_deg (0-3, default 3). sensor_noise (rad, default 1e-4).

@@ -42,6 +42,7 @@ from ssme_envs.models.nozzle import (
     published_nozzle,
     recommended_substeps,
     simulate_nozzle,
+    strong_nozzle,
 )
 from ssme_envs.models.uncertainty import ParameterUncertainty
 from ssme_envs.outputs import atomic_write
@@ -71,13 +72,8 @@ class NozzleRecord:
     output_name: str = "beta"
 
 
-def strong_hysteresis_nozzle() -> NozzleParameters:
-    """A nozzle of our own with far stronger hysteresis than Table 1 (illustrative, not VLS data).
-
-    Its joint yields at about 1.7 deg (w_max = 0.029 rad) against Table 1's 20 deg, so a +-3 deg
-    test sweeps well into the hysteretic regime.
-    """
-    return NozzleParameters(J=20.0, b=250.0, k=1.6e5, a=0.15, A=1.0, beta=120.0, gamma=80.0, n=1.5)
+# the bench tests' name for the strong-hysteresis nozzle of the models
+strong_hysteresis_nozzle = strong_nozzle
 
 
 def _bench_torque(samples: int, n_bits: int, clock: int, amplitude: float) -> np.ndarray:

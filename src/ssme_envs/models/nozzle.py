@@ -50,10 +50,16 @@ from ssme_envs.models.nozzle_model import NozzleModel
 from ssme_envs.models.nozzle_substeps import *  # noqa: F403
 from ssme_envs.models.statespace import check_dt
 
+# The packaged identified models: which bench test (truth) each comes from.
+IDENTIFIED_FILES = {"table1": "nozzle_identified.json", "strong": "nozzle_strong_identified.json"}
 
-def identified_nozzle() -> NozzleModel:
-    """The packaged nozzle model identified from the embedded bench test on Table 1's nozzle."""
-    path = _DATA.joinpath("nozzle_identified.json")
+
+def identified_nozzle(truth: str = "table1") -> NozzleModel:
+    """A packaged nozzle model identified from the embedded bench test: on Table 1's nozzle
+    (``"table1"``) or on :func:`strong_nozzle` (``"strong"``)."""
+    if truth not in IDENTIFIED_FILES:
+        raise ValueError(f"truth must be one of {', '.join(IDENTIFIED_FILES)}, got {truth!r}")
+    path = _DATA.joinpath(IDENTIFIED_FILES[truth])
     return NozzleModel.from_dict(json.loads(path.read_text()), source=path.name)
 
 
@@ -183,6 +189,7 @@ def simulate_nozzle(
 
 
 __all__ = [
+    "IDENTIFIED_FILES",
     "NozzleCore",
     "identified_nozzle",
     "simulate_nozzle",

@@ -127,6 +127,16 @@ def published_nozzle(which: str = "bouc_wen") -> NozzleParameters:
     return NozzleParameters(**table[which])
 
 
+def strong_nozzle() -> NozzleParameters:
+    """A nozzle of our own with far stronger hysteresis than Table 1 (illustrative, not VLS data).
+
+    Its joint yields at about 1.7 deg (w_max = 0.029 rad) against Table 1's 20 deg, so the +-3 deg
+    working range sweeps well into the hysteretic regime; small-signal stiffness 1.6e5 N m/rad,
+    J = 20 kg m^2, b = 250 N m s/rad.
+    """
+    return NozzleParameters(J=20.0, b=250.0, k=1.6e5, a=0.15, A=1.0, beta=120.0, gamma=80.0, n=1.5)
+
+
 class RK4Parameters(NamedTuple):
     """The normalized nozzle as the integrators use it: floats, or (N,) arrays per nozzle."""
 
@@ -273,4 +283,5 @@ __all__ = [
     "rk4_arrays",
     "rk4_floats",
     "rk4_parameters",
+    "strong_nozzle",
 ]
