@@ -474,3 +474,21 @@ def test_ctrl_c_exits_130_with_one_line_and_leaves_the_earlier_run(tmp_path, ear
     assert err == "error: interrupted (Ctrl-C)\n"
     assert _tree(tmp_path / "out") == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "r.csv"]
+
+
+@pytest.mark.parametrize(
+    ("config", "algo", "option"),
+    [
+        ("num_envs = 1000000000\n", "ppo", "num_envs"),
+        ("[hyperparameters]\nbuffer_size = 100000000000\n", "sac", "buffer_size"),
+    ],
+)
+def test_train_counts_beyond_memory_are_refused_before_work(tmp_path, capsys, config, algo, option):
+    path = tmp_path / "big.toml"
+    path.write_text(config)
+    out = tmp_path / "run"
+    argv = ["train", "--env", "ssme_envs/NozzleTVC-v0", "--algo", algo, "--steps", "100"]
+    assert main([*argv, "--config", str(path), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"error: {option} ") and "of memory" in err and err.count("\n") == 1
+    assert not out.exists()

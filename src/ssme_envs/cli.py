@@ -24,6 +24,7 @@ from pathlib import Path
 
 from ssme_envs.cli_checks import (
     check_seed,
+    check_training,
     check_vector_sizes,
     error_line,
     one_line,
@@ -334,6 +335,7 @@ def _train(args: argparse.Namespace) -> int:
         config["tensorboard"] = True
     config = check_config(config, str(args.config or "options"))
     check_env_id(config["env"])  # before the output directory is made
+    check_training(config)
     _make_dir(args.out)
     summary = train(config, args.out)
     kept = summary["kept"]

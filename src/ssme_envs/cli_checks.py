@@ -172,6 +172,19 @@ def check_workers(workers: int) -> None:
     check_memory("--workers", workers, WORKER_BYTES, "one process each")
 
 
+def check_training(config: dict[str, Any]) -> None:
+    """Refuse a training config whose envs or buffers would not fit in memory: ``num_envs``
+    (each env's episode buffers plus its share of PPO's float32 rollout of ``n_steps``) and an
+    off-policy ``buffer_size`` (observations twice, actions, reward and done per transition)."""
+    obs, act, steps = env_shape(config["env"])
+    hyper = config.get("hyperparameters", {})
+    rollout = 4 * 2 * (obs + act + 4) * int(hyper.get("n_steps", 2048)) if config["algo"] == "ppo" else 0
+    check_memory("num_envs", config["num_envs"], ENV_BYTES_PER_STEP * steps + rollout, "envs and rollouts")
+    if config["algo"] != "ppo":
+        buffer = int(hyper.get("buffer_size", 1_000_000))
+        check_memory("buffer_size", buffer, 4 * (2 * obs + act + 2), "replay buffer transitions")
+
+
 def _gymnasium_error(exc: BaseException) -> bool:
     module = sys.modules.get("gymnasium.error")
     return module is not None and isinstance(exc, module.Error)
@@ -237,6 +250,7 @@ __all__ = [
     "check_finite",
     "check_memory",
     "check_seed",
+    "check_training",
     "check_vector_sizes",
     "check_workers",
     "error_line",
