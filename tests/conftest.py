@@ -22,3 +22,15 @@ def dlsim(a, b, c, u):
     m, p = b.shape[1], c.shape[0]
     _, y, _ = _dlsim((a, b, c, np.zeros((p, m)), 1.0), u)
     return y.reshape(-1, p)
+
+
+# Options of every env that make its episodes short: truncations within a few dozen steps.
+SHORT_EPISODES = {
+    "ssme_envs/EngineTracking-v0": {"episode_seconds": 2.0, "action_scale": 0.2},
+    "ssme_envs/EngineThrottle-v0": {
+        "profile": [(0.0, 100.0), (1.0, 100.0), (2.0, 90.0)],
+        "action_scale": 0.2,
+    },
+    "ssme_envs/NozzleTVC-v0": {"episode_seconds": 0.4},
+    "ssme_envs/LauncherPitch-v0": {"episode_seconds": 1.0},
+}

@@ -10,6 +10,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 import pytest
+from conftest import SHORT_EPISODES
 from gymnasium.vector import AutoresetMode
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv, VecFrameStack, VecNormalize
@@ -18,15 +19,7 @@ import ssme_envs  # noqa: F401  (registers the environments)
 from ssme_envs.envs.sb3_adapter import SB3VecEnv, make_sb3_vec_env
 
 N_ENVS = 3
-ENVS = {
-    "ssme_envs/EngineTracking-v0": {"episode_seconds": 2.0, "action_scale": 0.2},
-    "ssme_envs/EngineThrottle-v0": {
-        "profile": [(0.0, 100.0), (1.0, 100.0), (2.0, 90.0)],
-        "action_scale": 0.2,
-    },
-    "ssme_envs/NozzleTVC-v0": {"episode_seconds": 0.4},
-    "ssme_envs/LauncherPitch-v0": {"episode_seconds": 1.0},
-}
+ENVS = SHORT_EPISODES
 KINDS = ("adapter", "dummy")
 VEC_ENV_WRAPPERS = [None, VecNormalize, VecFrameStack]
 BIAS = np.array([0.0, 0.6, -1.0])[:, None]  # sub-env 0 runs to its time limit, 1 and 2 leave the envelope

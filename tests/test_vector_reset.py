@@ -5,21 +5,14 @@ from __future__ import annotations
 import gymnasium as gym
 import numpy as np
 import pytest
+from conftest import SHORT_EPISODES
 from gymnasium.vector import AutoresetMode
 
 import ssme_envs  # noqa: F401  (registers the environments)
 from ssme_envs.envs.tracking_env import EpisodeOverError
 
 # short episodes: truncations within a few dozen steps
-ENVS = {
-    "ssme_envs/EngineTracking-v0": {"episode_seconds": 2.0, "action_scale": 0.2},
-    "ssme_envs/EngineThrottle-v0": {
-        "profile": [(0.0, 100.0), (1.0, 100.0), (2.0, 90.0)],
-        "action_scale": 0.2,
-    },
-    "ssme_envs/NozzleTVC-v0": {"episode_seconds": 0.4},
-    "ssme_envs/LauncherPitch-v0": {"episode_seconds": 1.0},
-}
+ENVS = SHORT_EPISODES
 N = 4
 BIAS = np.array([0.0, 0.1, 0.6, -1.0])[:, None]  # per sub-env: the last two leave the envelope
 
