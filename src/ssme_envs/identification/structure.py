@@ -36,6 +36,12 @@ RATIO_FLOOR = 1e-6
 # score improves) and to "dependent".
 STEPS_DOWN = 2
 STEPS_UP = 1
+# Sets flipped on from at each further step down: the best one alone can lead away from the
+# structure (a weak row's neighbour improves first), the runners-up keep the other paths open.
+BEAM = 3
+# Steps of the walk over single indices from the best set, and the largest order it visits.
+MAX_WALK = 6
+MAX_WALK_ORDER = 12
 # A BIC difference below this is weak evidence (Kass and Raftery 1995: above 10 is very strong).
 CLOSE_MARGIN = 10.0
 
@@ -202,7 +208,9 @@ def rank_search(
             norm = np.linalg.norm(col)
             resid = col - basis @ (basis.T @ col)
             ratio = float(np.linalg.norm(resid) / norm) if norm > 0 else 0.0
-            kept = (ratio > rank_tol) != ((i, power) in flipped)
+            # An output's own row (power 0) is kept unless it repeats the others to round-off:
+            # a weak but measured output is still an output (rank_tol judges the shifted rows).
+            kept = (ratio > (RATIO_FLOOR if power == 0 else rank_tol)) != ((i, power) in flipped)
             ratios.append((i, power, ratio, kept))
             if kept and ratio > 0:
                 basis = np.column_stack([basis, resid / np.linalg.norm(resid)])
@@ -241,7 +249,7 @@ def explore(search: StructureSearch, score: Callable[[tuple[int, ...]], Candidat
 
     Downwards (larger models): every set reached by flipping up to ``STEPS_DOWN`` cut rows (a
     flip can make a later row look dependent, so two are needed to reach some structures), then
-    on from the best while each further flip improves on the best score so far. Upwards:
+    on from the ``BEAM`` best while a further flip improves on the best score so far. Upwards:
     ``STEPS_UP`` steps of cutting the weakest kept row. ``score`` returns the candidate with its
     criterion (inf when it cannot be fitted).
     """
@@ -263,12 +271,13 @@ def explore(search: StructureSearch, score: Callable[[tuple[int, ...]], Candidat
         reached += level
     if reached:
         best = min(c.criterion for c in scored.values())
-        start = min(reached)
+        frontier = sorted(reached)[:BEAM]
         for _ in range(search.rows.shape[1]):
-            children = visit(start[2], -1)
+            children = [child for *_, flipped in frontier for child in visit(flipped, -1)]
             if not children or min(children)[0] >= best:
                 break
-            start, best = min(children), min(children)[0]
+            frontier, best = sorted(children)[:BEAM], min(children)[0]
+    _walk_indices(scored, score)
     flipped = search.flipped
     for _ in range(STEPS_UP):
         children = visit(flipped, +1)
@@ -279,6 +288,30 @@ def explore(search: StructureSearch, score: Callable[[tuple[int, ...]], Candidat
     ranked = search.ranked()
     if ranked:
         search.indices = ranked[0].indices
+
+
+def _walk_indices(
+    scored: dict[tuple[int, ...], Candidate], score: Callable[[tuple[int, ...]], Candidate]
+) -> None:
+    """From the best set, one output's index up or down at a time while that improves the best
+    score: reaches structures no single rank decision separates from the best (a weak row of one
+    output behind a strong one of another)."""
+    for _ in range(MAX_WALK):
+        ok = [c for c in scored.values() if np.isfinite(c.criterion)]
+        if not ok:
+            return
+        best = min(ok, key=lambda c: c.criterion)
+        moves = []
+        for i in range(len(best.indices)):
+            for step in (1, -1):
+                mu = list(best.indices)
+                mu[i] += step
+                if 1 <= mu[i] and sum(mu) <= MAX_WALK_ORDER and tuple(mu) not in scored:
+                    moves.append(tuple(mu))
+        for mu in moves:
+            scored[mu] = score(mu)
+        if not moves or min(scored[mu].criterion for mu in moves) >= best.criterion:
+            return
 
 
 def estimate_indices(
