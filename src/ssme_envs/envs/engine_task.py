@@ -22,10 +22,12 @@ from ssme_envs.models.engine import (
     StepParameters,
     TruthConfig,
     check_stable_plant,
+    dynamics_pair_floats,
     identified_model,
     output_coupling,
+    pair_rows,
     step_arrays,
-    step_floats,
+    valves_pair_floats,
 )
 from ssme_envs.models.linked import LinkedEngineModel
 from ssme_envs.models.statespace import AlphaCanonicalModel
@@ -121,8 +123,14 @@ class EngineTask:
     envelope: float = 0.1  # tracking error (noise-free, normalized) that ends an episode (10 %)
     integral_limit: float = 100.0  # % s, anti-windup bound of the error integrals
     offset_table: np.ndarray | None = field(default=None, repr=False)  # (T + 1, m) added to commands
-    rows: tuple = field(init=False, repr=False)  # K, B, lambda - 1 as floats, for the float core
+    # the float core's operands in one tuple (one attribute read a step): pair_rows of K and B,
+    # lambda - 1 of each valve, half the backlash, the stiction band
+    rows: tuple = field(init=False, repr=False)
     noise_scale: tuple[float, float] = field(init=False, repr=False)  # noise_std as floats
+    # noise_std as float64 arrays of one element: the batched step scales the float32 unit draws
+    # by them straight into float64 (the products of the exact upcast, without an astype pass;
+    # arrays, not numpy scalars, which numpy 1's value-based casting would leave float32)
+    noise_scale_arrays: tuple = field(init=False, repr=False)
     offsets: Schedule | None = field(init=False, repr=False)  # offset_table for both carriers
     fault_step: int = field(init=False)  # the step after which the fault acts (-1: none)
     # largest reward loss of one step inside the envelope (errors and valve rates at their bounds)
@@ -132,6 +140,8 @@ class EngineTask:
     action_names: ClassVar[tuple[str, ...]] = ("OPOV", "FPOV")
     n_actions: ClassVar[int] = 2
     n_channels: ClassVar[int] = 2  # Pc, MR
+    # the batched step takes the unit noise float32, as drawn (see noise_scale_arrays)
+    scales_float32_noise: ClassVar[bool] = True
 
     @classmethod
     def build(
@@ -197,8 +207,19 @@ class EngineTask:
         )
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "rows", self.params.floats())
+        k_rows, b_rows, lam = self.params.floats()
+        object.__setattr__(
+            self,
+            "rows",
+            (
+                pair_rows(self.params.shift_source, k_rows, b_rows),
+                *lam,
+                self.params.half_backlash,
+                self.params.stiction,
+            ),
+        )
         object.__setattr__(self, "noise_scale", tuple(self.noise_std.tolist()))
+        object.__setattr__(self, "noise_scale_arrays", tuple(np.full(1, s) for s in self.noise_scale))
         offsets = None if self.offset_table is None else Schedule.of(self.offset_table)
         object.__setattr__(self, "offsets", offsets)
         object.__setattr__(
@@ -262,7 +283,7 @@ class EngineTask:
 
     def initial_plant(self, n: int | None) -> EnginePlant:
         if n is None:
-            return EnginePlant([0.0] * self.n_states, [0.0, 0.0], [0.0, 0.0])
+            return EnginePlant([0.0] * self.n_states, (0.0, 0.0), (0.0, 0.0))
         return EnginePlant(np.zeros((self.n_states, n)), np.zeros((2, n)), np.zeros((2, n)))
 
     def initial_state(self, n: int | None = None) -> EngineState:
@@ -276,12 +297,23 @@ class EngineTask:
         self, plant: EnginePlant, c0: Value, c1: Value, t: Any, nominal: Any, ops: Carrier
     ) -> tuple[EnginePlant, Value, Value]:
         """The plant under the valve commands (c0, c1) of step t - 1 -> t: (plant, Pc, MR).
-        ``nominal``: the commands' offsets of the step (the throttle's schedule) or None."""
+        ``nominal``: the commands' offsets of the step (the throttle's schedule) or None. (The
+        bench times it as the plant's floor; :meth:`step` calls :meth:`advance` with its
+        commands as they are.)"""
+        return self.advance(plant, np.stack((c0, c1)) if ops.batched else (c0, c1), t, nominal, ops)
+
+    def advance(
+        self, plant: EnginePlant, command: Any, t: Any, nominal: Any, ops: Carrier
+    ) -> tuple[EnginePlant, Value, Value]:
+        """:meth:`plant_step` on the commands of both valves: a (2, N) array, or two floats."""
         if ops.batched:
-            x, linkage, valve = step_arrays(*plant, np.stack((c0, c1)), self.params)
+            x, linkage, valve = step_arrays(*plant, command, self.params)
             return EnginePlant(x, linkage, valve), x[-2], x[-1]
-        x, linkage, valve = step_floats(*plant, [c0, c1], self.params, self.rows)
-        return EnginePlant(x, linkage, valve), x[-2], x[-1]
+        pairs, g0, g1, half, stick = self.rows
+        x, linkage, valve = plant
+        linkage, (v0, v1) = valves_pair_floats(linkage, valve, *command, half, stick)
+        x = dynamics_pair_floats(x, v0 + g0 * abs(v0), v1 + g1 * abs(v1), pairs)
+        return EnginePlant(x, linkage, (v0, v1)), x[-2], x[-1]
 
     @staticmethod
     def valve_positions(plant: EnginePlant) -> Any:
@@ -296,11 +328,19 @@ class EngineTask:
         reward, terminated)."""
         plant, integral, prev, held = state
         a0, a1 = action[0], action[1]
-        cmd = [a0 * self.action_scale, a1 * self.action_scale]
         nominal = None
-        if self.offsets is not None:  # the throttle's nominal valve schedule
-            nominal = ops.at(self.offsets, t)
-            cmd = [nominal[0] + cmd[0], nominal[1] + cmd[1]]
+        if ops.batched:  # action is (2, N): one pass makes the commands of both valves
+            cmd = action * self.action_scale
+            if self.offsets is not None:  # the throttle's nominal valve schedule
+                nominal = ops.at(self.offsets, t)
+                cmd += nominal
+            s0, s1 = self.noise_scale_arrays
+        else:
+            cmd = [a0 * self.action_scale, a1 * self.action_scale]
+            if self.offsets is not None:
+                nominal = ops.at(self.offsets, t)
+                cmd = [nominal[0] + cmd[0], nominal[1] + cmd[1]]
+            s0, s1 = self.noise_scale
         fault = self.fault
         if fault is not None and fault.kind != "sensor_bias":
             i, active = fault.index, t > self.fault_step
@@ -309,8 +349,7 @@ class EngineTask:
                 cmd[i] = ops.where(active, held, cmd[i])
             else:  # gain_loss
                 cmd[i] = ops.where(active, cmd[i] * fault.magnitude, cmd[i])
-        plant, y0, y1 = self.plant_step(plant, cmd[0], cmd[1], t, nominal, ops)
-        s0, s1 = self.noise_scale
+        plant, y0, y1 = self.advance(plant, cmd, t, nominal, ops)
         m = [y0 + noise[0] * s0, y1 + noise[1] * s1]
         if fault is not None and fault.kind == "sensor_bias":
             m[fault.index] = ops.where(t >= self.fault_step, m[fault.index] + fault.magnitude, m[fault.index])
@@ -322,7 +361,8 @@ class EngineTask:
         d0, d1 = a0 - prev[0], a1 - prev[1]
         reward = -self.error_weight * (e0 * e0 + e1 * e1) - self.rate_weight * (d0 * d0 + d1 * d1)
         terminated = (abs(y0 - r0) > self.envelope) | (abs(y1 - r1) > self.envelope)
-        reward = ops.where(terminated, reward - self.step_cost_bound * (self.horizon - t + 1), reward)
+        if ops.any(terminated):  # the penalty's passes only on the (rare) steps that need them
+            reward = ops.where(terminated, reward - self.step_cost_bound * (self.horizon - t + 1), reward)
         obs = (100.0 * m[0], 100.0 * m[1], 100.0 * r0, 100.0 * r1, e0, e1, i0, i1, a0, a1)
         return EngineState(plant, (i0, i1), (a0, a1), held), obs, reward, terminated
 

@@ -17,9 +17,10 @@ from ssme_envs.models.engine import (
     ENGINE_DT,
     TruthConfig,
     dynamics_arrays,
-    dynamics_floats,
+    dynamics_pair_floats,
+    pair_rows,
     valves_arrays,
-    valves_floats,
+    valves_pair_floats,
 )
 from ssme_envs.models.linked import POWER_RANGE, LinkedEngineModel
 
@@ -76,7 +77,12 @@ class ThrottleTask(EngineTask):
             (slice(end - len(block), end), table.shape[1:])
             for end, block, table in zip(ends, rows, tables, strict=True)
         )
-        per_step = list(zip(*(table.tolist() for table in tables), strict=True))
+        # per step: pair_rows of K and B (the float core's), lambda - 1, the state offsets
+        shift = self.params.shift_source
+        per_step = [
+            (pair_rows(shift, k, b), lam, offset)
+            for k, b, lam, offset in zip(*(table.tolist() for table in tables), strict=True)
+        ]
         object.__setattr__(self, "schedule", Schedule(per_step, np.ascontiguousarray(np.concatenate(rows))))
         object.__setattr__(self, "schedule_parts", parts)
 
@@ -150,12 +156,12 @@ class ThrottleTask(EngineTask):
     def initial_plant(self, n: int | None) -> EnginePlant:
         u0 = self.nominal_valves[0]
         if n is None:
-            return EnginePlant(self.x_start.tolist(), u0.tolist(), u0.tolist())
+            return EnginePlant(self.x_start.tolist(), tuple(u0.tolist()), tuple(u0.tolist()))
         u0 = np.repeat(u0[:, None], n, axis=1)
         return EnginePlant(np.repeat(self.x_start[:, None], n, axis=1), u0, u0.copy())
 
-    def plant_step(
-        self, plant: EnginePlant, c0: Value, c1: Value, t: Any, nominal: Any, ops: Carrier
+    def advance(
+        self, plant: EnginePlant, command: Any, t: Any, nominal: Any, ops: Carrier
     ) -> tuple[EnginePlant, Value, Value]:
         """The linked model with the parameters of step t - 1 -> t (the plant core's float or
         array arithmetic, the same operations in the same order)."""
@@ -166,14 +172,17 @@ class ThrottleTask(EngineTask):
             k, b, lam, offset = (
                 rows[part].reshape(*shape, rows.shape[-1]) for part, shape in self.schedule_parts
             )
-            linkage, valve = valves_arrays(linkage, valve, np.stack((c0, c1)), half, stick)
+            linkage, valve = valves_arrays(linkage, valve, command, half, stick)
             u_star = valve + lam * np.abs(valve - nominal)
-            x = dynamics_arrays(x, u_star, shift, k, b) + offset
+            x = dynamics_arrays(x, u_star, shift, k, b)
+            x += offset  # in place: the same sum, without a third (n, N) array
         else:
-            k_rows, b_rows, lam, offset = ops.at(self.schedule, t)
-            linkage, valve = valves_floats(linkage, valve, [c0, c1], half, stick)
-            u_star = [v + g * abs(v - un) for v, g, un in zip(valve, lam, nominal)]
-            x = [xi + oi for xi, oi in zip(dynamics_floats(x, u_star, shift, k_rows, b_rows), offset)]
+            pairs, (g0, g1), offset = ops.at(self.schedule, t)
+            linkage, (v0, v1) = valves_pair_floats(linkage, valve, *command, half, stick)
+            n0, n1 = nominal
+            x = dynamics_pair_floats(x, v0 + g0 * abs(v0 - n0), v1 + g1 * abs(v1 - n1), pairs)
+            x = [xi + oi for xi, oi in zip(x, offset)]
+            valve = (v0, v1)
         return EnginePlant(x, linkage, valve), x[-2], x[-1]
 
 

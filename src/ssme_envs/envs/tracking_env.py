@@ -11,7 +11,7 @@ import gymnasium as gym
 import numpy as np
 
 from ssme_envs.envs.rendering import close_figure, render_history
-from ssme_envs.envs.task import FLOATS, next_stop
+from ssme_envs.envs.task import CLIP_UFUNC, FLOATS, next_stop
 
 
 class EpisodeOverError(gym.error.ResetNeeded, ValueError, AssertionError):
@@ -122,19 +122,18 @@ class TrackingEnv(gym.Env):
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict]:
         task = self.task
         n = task.n_actions
-        try:
-            if len(action) != n:
-                raise ValueError
-            values = [float(a) for a in action]
-        except (TypeError, ValueError, IndexError):
-            meaning = self.action_meaning or ", ".join(task.action_names)
-            raise ValueError(
-                f"action must be {n} number{'s' if n > 1 else ''} ({meaning}), got {action!r}"
-            ) from None
-        if not all(map(math.isfinite, values)):
+        if type(action) is np.ndarray and action.shape == (n,) and action.dtype.kind == "f":
+            values = action.tolist()  # the Python floats float() gives, in one call
+        else:
+            values = self._action_values(action)
+        # one sum; the element search only when it is not finite (finite values whose sum
+        # overflows are actions, clipped below)
+        if not math.isfinite(sum(values)) and not all(map(math.isfinite, values)):
             raise ValueError(f"action must be finite, got {values if n > 1 else values[0]} (NaN or inf)")
-        self._check_running()
-        values = [min(max(a, -1.0), 1.0) for a in values]
+        if self._ended:  # _check_running, inline: a call per step spared
+            self._check_running()
+        # min(max(a, -1), 1) as the builtins decide, without their calls (the values are finite)
+        values = [-1.0 if a < -1.0 else 1.0 if a > 1.0 else a for a in values]
         t = self._t + 1
         if t == len(self._noise):
             self._extend()
@@ -146,7 +145,7 @@ class TrackingEnv(gym.Env):
             if self.render_mode == "human":
                 self.render()
         out = np.array(obs, dtype=np.float32)
-        np.minimum(np.maximum(out, self._low, out=out), self._high, out=out)  # np.clip, without its overhead
+        CLIP_UFUNC(out, self._low, self._high, out=out)  # into the bounds (np.clip, without its wrapper)
         info = {}
         if not math.isfinite(reward):  # the state overflowed or went NaN: end the episode (see Episode End)
             penalty = task.nonfinite_reward(t)
@@ -156,6 +155,19 @@ class TrackingEnv(gym.Env):
         terminated, truncated = bool(terminated), t >= task.horizon
         self._ended = "terminated" if terminated else "truncated" if truncated else ""
         return out, float(reward), terminated, truncated, info
+
+    def _action_values(self, action: Any) -> list[float]:
+        """The action as ``n_actions`` Python floats, or ValueError."""
+        n = self.task.n_actions
+        try:
+            if len(action) != n:
+                raise ValueError
+            return [float(a) for a in action]
+        except (TypeError, ValueError, IndexError):
+            meaning = self.action_meaning or ", ".join(self.task.action_names)
+            raise ValueError(
+                f"action must be {n} number{'s' if n > 1 else ''} ({meaning}), got {action!r}"
+            ) from None
 
     def _extend(self) -> tuple[np.ndarray, np.ndarray]:
         """Compute the episode's next block of steps (``next_stop``) as the vector env does;

@@ -29,7 +29,7 @@ from ssme_envs.envs.engine_throttle import ThrottleTask
 from ssme_envs.envs.launcher_pitch import LauncherTask
 from ssme_envs.envs.nozzle_task import NozzleTask
 from ssme_envs.envs.sub_env import SubEnv
-from ssme_envs.envs.task import GATHER, SYNCED, next_stop, set_columns
+from ssme_envs.envs.task import CLIP_UFUNC, GATHER, SYNCED, next_stop, set_columns
 from ssme_envs.envs.tracking_env import EpisodeOverError, check_reset_options
 
 RESET_OPTIONS = {"reset_mask": "a numpy bool array of shape (num_envs,), at least one True"}
@@ -106,6 +106,12 @@ class TrackingVectorEnv(VectorEnv):
         self.single_observation_space = self.task.observation.space()
         self.observation_space = batch_space(self.single_observation_space, num_envs)
         self._low, self._high = self.single_observation_space.low, self.single_observation_space.high
+        self._low_col, self._high_col = (
+            self._low[:, None],
+            self._high[:, None],
+        )  # bounds of the (columns, N) table
+        # a task that scales float32 unit noise into float64 itself is handed it as drawn
+        self._noise_as_drawn = getattr(self.task, "scales_float32_noise", False)
         n, length, channels = num_envs, self.task.horizon + 1, self.task.n_channels
         self._rngs: list[np.random.Generator] = []
         self._seeds: list[int] = []  # np_random_seed of each sub-env (-1: generator set directly)
@@ -126,6 +132,10 @@ class TrackingVectorEnv(VectorEnv):
         self._uniforms = np.empty((self.task.draw_size, n), dtype=np.float32)  # _draws transposed
         self._ready = np.zeros(n, dtype=np.int64)
         self._t = np.zeros(n, dtype=np.int64)
+        # bounds that spare most steps the (N,) comparison of t with _ready: no step reaches an
+        # uncomputed block while the largest t (bounded above) is below the smallest _ready
+        self._ready_min = 0
+        self._t_bound = 0
         self._synced = True  # every env at the same step: reads are slices, not gathers
         self._rows = np.arange(n)
         self._state = self.task.initial_state(n)
@@ -174,6 +184,8 @@ class TrackingVectorEnv(VectorEnv):
         for i in envs.tolist():  # positional arguments: half the cost of the keywords per call
             rngs[i].random(None, single, rows[i])
         self._t[envs] = 0
+        if k == self.num_envs:
+            self._t_bound = 0
         self._synced = bool((self._t == self._t[0]).all())
         self._ready[envs] = 0
         refs, noise = self._compute(envs, 0)
@@ -182,6 +194,7 @@ class TrackingVectorEnv(VectorEnv):
 
     def _extend(self, t: np.ndarray) -> None:
         """Compute the next block of the episodes that reach their uncomputed steps at ``t``."""
+        self._t_bound = int(t.max())
         late = np.flatnonzero(t >= self._ready)
         starts = self._ready[late]
         for start in np.unique(starts).tolist():  # one block per episode position (synced: one)
@@ -200,15 +213,16 @@ class TrackingVectorEnv(VectorEnv):
             stop = next_stop(start, self.task.horizon + 1)
             uniforms = np.take(self._draws, envs, axis=0).T
         refs, noise = self.task.episodes(uniforms, start, stop)
-        if every:  # contiguous slices rather than a scatter
-            self._noise[:, start:stop] = noise
+        if every:  # whole tables: adopted when fresh (a copy of tens of MB spared), else sliced in
+            self._noise = _adopt(self._noise, noise)
             if self._refs is not None:
-                self._refs[:, start:stop] = refs
+                self._refs = _adopt(self._refs, refs)
         else:
             self._noise[:, start:stop, envs] = noise
             if self._refs is not None:
                 self._refs[:, start:stop, envs] = refs
         self._ready[envs] = stop
+        self._ready_min = int(self._ready.min())
         return refs, noise
 
     def reset(
@@ -277,13 +291,13 @@ class TrackingVectorEnv(VectorEnv):
                     f"action of env {bad[0, 0]} must be finite, got {acts[bad[0, 0]].tolist()} (NaN or inf)"
                 )
         clipped = np.empty(shape[::-1])  # state-major and contiguous, as the core wants
-        np.maximum(acts.T, -1.0, out=clipped)
-        np.minimum(clipped, 1.0, out=clipped)
+        CLIP_UFUNC(acts.T, -1.0, 1.0, out=clipped)
         task = self.task
         t = self._t
         t += 1
         np.minimum(t, task.horizon, out=t)  # an env past its end is restarted below
-        if (t >= self._ready).any():
+        self._t_bound = min(self._t_bound + 1, task.horizon)
+        if self._t_bound >= self._ready_min and (t >= self._ready).any():
             self._extend(t)
         if self._synced:  # contiguous slices
             noise = self._noise[:, t[0]]
@@ -295,16 +309,18 @@ class TrackingVectorEnv(VectorEnv):
                 refs = np.take(self._shared_refs, t, axis=1)
             else:
                 refs = np.take(self._refs.reshape(len(self._refs), -1), flat, axis=1)
+        if not self._noise_as_drawn:
+            noise = noise.astype(np.float64)
         self._state, values, reward, terminated = task.step(
-            self._state, clipped, t, refs, noise.astype(np.float64), SYNCED if self._synced else GATHER
+            self._state, clipped, t, refs, noise, SYNCED if self._synced else GATHER
         )
         # the observation values as rows of a float32 table, handed out transposed (N, columns)
         table = np.empty((len(values), self.num_envs), dtype=np.float32)
         for row, value in zip(table, values, strict=True):
             row[...] = value
+        # into the observation bounds, as the scalar envs do: one pass over the table
+        CLIP_UFUNC(table, self._low_col, self._high_col, out=table)
         obs = table.T
-        np.maximum(obs, self._low, out=obs)  # into the observation bounds, as the scalar envs do
-        np.minimum(obs, self._high, out=obs)
         truncated = t >= self._limit
         # one reduction; the sub-envs whose step went NaN or infinite only on failure
         step_infos = {} if math.isfinite(reward.sum()) else self._end_nonfinite(obs, reward, terminated, t)
@@ -361,6 +377,16 @@ class TrackingVectorEnv(VectorEnv):
         terminated[rows] = True
         obs[rows] = np.nan_to_num(obs[rows], nan=0.0)
         return {"nonfinite": bad.copy(), "_nonfinite": bad}
+
+
+def _adopt(table: np.ndarray, whole: np.ndarray) -> np.ndarray:
+    """``whole`` as the new ``table`` when it is a fresh array of the table's shape and dtype
+    (nothing else holds it), else ``table`` with ``whole`` copied in."""
+    fresh = whole.base is None and whole.flags.c_contiguous and whole.flags.writeable
+    if fresh and whole.shape == table.shape and whole.dtype == table.dtype:
+        return whole
+    table[...] = whole
+    return table
 
 
 def _transpose(table: np.ndarray, out: np.ndarray, tile: int = 256) -> np.ndarray:

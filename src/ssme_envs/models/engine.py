@@ -198,6 +198,54 @@ def step_floats(x: list, linkage: list, valve: list, command: list, p: StepParam
     return dynamics_floats(x, u, p.shift_source, k_rows, b_rows), linkage, valve
 
 
+# The env tasks' engines have two valves and two outputs: their float step is the one above,
+# unrolled over unpacked floats (a third of its time, which is list building and zips), the
+# same operations in the same order.
+
+
+def pair_rows(shift_source: tuple, k_rows: list, b_rows: list) -> tuple:
+    """Per state ``(source, K_i0, K_i1, B_i0, B_i1)`` of a two-output, two-valve model, for
+    :func:`dynamics_pair_floats`."""
+    return tuple(
+        (source, k0, k1, b0, b1)
+        for source, (k0, k1), (b0, b1) in zip(shift_source, k_rows, b_rows, strict=True)
+    )
+
+
+def valves_pair_floats(
+    linkage: tuple, valve: tuple, c0: float, c1: float, half: float, stick: float
+) -> tuple[tuple, tuple]:
+    """:func:`valves_floats` for two valves. ``min(max(l, lo), hi)`` is spelled as the builtins
+    decide (each returns its first argument unless the second lies strictly beyond it), which
+    gives the same value, NaN and signed zeros included, without two calls per valve."""
+    l0, l1 = linkage
+    if half:
+        lo, hi = c0 - half, c0 + half
+        l0 = lo if lo > l0 else l0
+        l0 = hi if hi < l0 else l0
+        lo, hi = c1 - half, c1 + half
+        l1 = lo if lo > l1 else l1
+        l1 = hi if hi < l1 else l1
+    else:
+        l0, l1 = c0, c1
+    if stick:
+        v0, v1 = valve
+        v0 = l0 if abs(l0 - v0) > stick else v0
+        v1 = l1 if abs(l1 - v1) > stick else v1
+    else:
+        v0, v1 = l0, l1
+    return (l0, l1), (v0, v1)
+
+
+def dynamics_pair_floats(x: list, u0: float, u1: float, rows: tuple) -> list:
+    """:func:`dynamics_floats` for two outputs and two valves; ``rows`` from :func:`pair_rows`."""
+    y0, y1 = x[-2], x[-1]
+    return [
+        ((x[source] + (k0 * y0 + k1 * y1)) if source >= 0 else (k0 * y0 + k1 * y1)) + (b0 * u0 + b1 * u1)
+        for source, k0, k1, b0, b1 in rows
+    ]
+
+
 def valves_arrays(linkage: np.ndarray, valve: np.ndarray, command: np.ndarray, half: float, stick: float):
     """Backlash then stiction for N engines' valves, (m, N) arrays. Returns (linkage, valve)."""
     linkage = np.minimum(np.maximum(linkage, command - half), command + half) if half else command
@@ -343,13 +391,7 @@ def simulate(
     if not np.all(np.isfinite(u)):
         raise ValueError("commands contain NaN or inf")
     n_runs, horizon, _ = u.shape
-    noise_std = np.atleast_1d(np.asarray(config.sensor_noise, dtype=float))
-    if noise_std.size == 1:
-        noise_std = np.full(model.n_outputs, noise_std[0])
-    if noise_std.shape != (model.n_outputs,):
-        raise ValueError(f"sensor_noise needs 1 or {model.n_outputs} values, got {noise_std.size}")
-    if np.any(noise_std > 0) and rng is None:
-        raise ValueError("sensor noise is on: pass a seeded numpy Generator as rng")
+    noise_std = sensor_noise_std(config, model.n_outputs, rng)
     clean = np.empty((n_runs, horizon, model.n_outputs))
     if n_runs == 1:  # the float path: same bits, an order of magnitude faster
         params = StepParameters.from_model(model, config)
@@ -367,7 +409,29 @@ def simulate(
     coupling = output_coupling(model)
     if coupling is not None and n_runs == 1:
         clean = clean @ coupling.T
-    measured = clean.copy()
-    if np.any(noise_std > 0):
-        measured += noise_std * rng.standard_normal(clean.shape)
+    measured = with_sensor_noise(clean, noise_std, rng)
     return (measured[0], clean[0]) if single else (measured, clean)
+
+
+def sensor_noise_std(config: TruthConfig, n_outputs: int, rng: np.random.Generator | None) -> np.ndarray:
+    """The standard deviation of each output's sensor noise, (n_outputs,), from the config's one
+    value or one per output; ValueError for another count, or when noise is on without ``rng``.
+    (The simulators of both engine truths read their noise through it.)"""
+    noise_std = np.atleast_1d(np.asarray(config.sensor_noise, dtype=float))
+    if noise_std.size == 1:
+        noise_std = np.full(n_outputs, noise_std[0])
+    if noise_std.shape != (n_outputs,):
+        raise ValueError(f"sensor_noise needs 1 or {n_outputs} values, got {noise_std.size}")
+    if np.any(noise_std > 0) and rng is None:
+        raise ValueError("sensor noise is on: pass a seeded numpy Generator as rng")
+    return noise_std
+
+
+def with_sensor_noise(
+    clean: np.ndarray, noise_std: np.ndarray, rng: np.random.Generator | None
+) -> np.ndarray:
+    """The measured outputs: a new array, ``clean`` plus ``noise_std`` times standard normals
+    drawn from ``rng`` (no draw when every deviation is zero)."""
+    if np.any(noise_std > 0):
+        return clean + noise_std * rng.standard_normal(clean.shape)
+    return clean.copy()

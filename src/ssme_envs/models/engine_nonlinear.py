@@ -74,7 +74,14 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.interpolate import CubicHermiteSpline, CubicSpline
 
-from ssme_envs.models.engine import POWER_LEVELS, TruthConfig, published_model, valves_arrays
+from ssme_envs.models.engine import (
+    POWER_LEVELS,
+    TruthConfig,
+    published_model,
+    sensor_noise_std,
+    valves_arrays,
+    with_sensor_noise,
+)
 from ssme_envs.models.statespace import AlphaCanonicalModel
 
 SCHEDULE_RANGE = (62.5, 115.0)  # %, saturation of the scheduling variable
@@ -330,12 +337,7 @@ def simulate_nonlinear(
         P = np.full(n_runs, P[0])
     if P.size != n_runs:
         raise ValueError(f"{P.size} operating points for {n_runs} runs")
-    noise = np.atleast_1d(np.asarray(config.sensor_noise, dtype=float))
-    noise = np.full(p, noise[0]) if noise.size == 1 else noise
-    if noise.shape != (p,):
-        raise ValueError(f"sensor_noise needs 1 or {p} values, got {noise.size}")
-    if np.any(noise > 0) and rng is None:
-        raise ValueError("sensor noise is on: pass a seeded numpy Generator as rng")
+    noise = sensor_noise_std(config, p, rng)
     x, rho, v_trim = engine.trim(P)
     y_eq = engine.nominal_outputs(P)
     linkage = np.zeros((m, n_runs))
@@ -346,5 +348,5 @@ def simulate_nonlinear(
         clean[:, k] = engine.outputs(x) - y_eq
         linkage, valve = valves_arrays(linkage, valve, np.array(u[:, k].T), half, stick)
         x, rho = engine.step(x, rho, v_trim + valve.T, config.asymmetric_gains)
-    measured = clean + noise * rng.standard_normal(clean.shape) if np.any(noise > 0) else clean.copy()
+    measured = with_sensor_noise(clean, noise, rng)
     return (measured[0], clean[0]) if single else (measured, clean)
