@@ -13,6 +13,7 @@ Prints and writes experiments/results/bench_ppo.md.
 from __future__ import annotations
 
 import argparse
+import os
 import time
 from pathlib import Path
 
@@ -53,10 +54,12 @@ def main() -> None:
         for env_id in ("CartPole-v1", *ENVS):
             rates[env_id] = max(rates.get(env_id, 0.0), _steps_per_s(env_id, args.steps, config))
     reference = rates["CartPole-v1"]
+    # the thread setting is part of the command: torch's thread count follows it
+    threads = f"OMP_NUM_THREADS={os.environ['OMP_NUM_THREADS']} " if "OMP_NUM_THREADS" in os.environ else ""
     lines = [
         "# PPO throughput through the SB3 adapter",
         "",
-        f"Command: `python experiments/bench_ppo.py --steps {args.steps} --rounds {args.rounds}` "
+        f"Command: `{threads}python experiments/bench_ppo.py --steps {args.steps} --rounds {args.rounds}` "
         f"(torch {torch.__version__}, {torch.get_num_threads()} threads). PPO steps per second including "
         "the updates, best of the rounds; the reference is the same PPO on CartPole-v1 through SB3's "
         "make_vec_env (DummyVecEnv), measured in the same run.",
