@@ -138,11 +138,14 @@ def bench_motion(
         amplitude *= np.radians(range_deg) / peak
     amplitude = min(amplitude, torque_limit)  # the actuator cannot do more
     tau = _bench_torque(samples, n_bits, clock, amplitude)
-    fast_dt = NOZZLE_DT / DECIMATION
-    angle = simulate_nozzle(
-        params, np.repeat(tau, DECIMATION), dt=fast_dt, substeps=1, torque_limit=torque_limit
+    return tau, _bench_rate_angle(params, tau, torque_limit)
+
+
+def _bench_rate_angle(joint: NozzleParameters, tau: np.ndarray, torque_limit: float) -> np.ndarray:
+    """The joint's true angle at the bench rate (rad) under the torque held over each Ts sample."""
+    return simulate_nozzle(
+        joint, np.repeat(tau, DECIMATION), dt=NOZZLE_DT / DECIMATION, substeps=1, torque_limit=torque_limit
     )
-    return tau, angle
 
 
 def acquire(angle: np.ndarray, seed: int = DEFAULT_SEED, noise_std: float = SENSOR_NOISE) -> np.ndarray:
@@ -188,10 +191,7 @@ def acquisition_bias(
     dict
         ``{"J", "b", "k"}``: mean identified from the simulated acquisitions minus ``jbk``.
     """
-    joint = NozzleParameters.linear(*jbk)
-    fast = simulate_nozzle(
-        joint, np.repeat(tau, DECIMATION), dt=NOZZLE_DT / DECIMATION, substeps=1, torque_limit=np.inf
-    )
+    fast = _bench_rate_angle(NozzleParameters.linear(*jbk), tau, np.inf)
     seeds = np.random.SeedSequence(seed).generate_state(draws if noise_std > 0 else 1)
     found = []
     for draw_seed in seeds:

@@ -140,7 +140,7 @@ def refine_contenders(
     ranked = search.ranked()
     if not ranked:
         return
-    floor = CRITERION_FLOOR * np.std(y[split:], axis=0)
+    floor = CRITERION_FLOOR * np.std(y, axis=0)  # the floor held_out_criterion applies
     for cand in ranked[:MAX_CONTENDERS]:
         if cand.criterion > ranked[0].criterion + REFINE_MARGIN or np.all(np.array(cand.rms_error) <= floor):
             continue
