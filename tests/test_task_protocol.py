@@ -48,7 +48,9 @@ class ToyTask:
         refs = np.repeat(uniforms[pairs:].astype(np.float64) - 0.5, stop - start, axis=0)[None]
         return refs, noise
 
-    def initial_state(self, n: int | None = None) -> ToyState:
+    plant_draw_size: ClassVar[int] = 0
+
+    def initial_state(self, n: int | None = None, plants: np.ndarray | None = None) -> ToyState:
         return ToyState(0.0, 0.0) if n is None else ToyState(np.zeros(n), np.zeros(n))
 
     def initial_observation(self, ref: np.ndarray, noise: np.ndarray) -> np.ndarray:

@@ -286,8 +286,10 @@ class EngineTask:
             return EnginePlant([0.0] * self.n_states, (0.0, 0.0), (0.0, 0.0))
         return EnginePlant(np.zeros((self.n_states, n)), np.zeros((2, n)), np.zeros((2, n)))
 
-    def initial_state(self, n: int | None = None) -> EngineState:
-        """The state at reset: floats (``n`` None) or arrays of ``n`` envs."""
+    plant_draw_size: ClassVar[int] = 0  # the engine's plant is the same in every episode
+
+    def initial_state(self, n: int | None = None, plants: np.ndarray | None = None) -> EngineState:
+        """The state at reset: floats (``n`` None) or arrays of ``n`` envs (``plants``: unused)."""
         if n is None:
             return EngineState(self.initial_plant(n), (0.0, 0.0), (0.0, 0.0), 0.0)
         pair = lambda: (np.zeros(n), np.zeros(n))  # noqa: E731  (fresh arrays: written by column)

@@ -19,10 +19,17 @@ from ssme_envs.envs.nozzle_task import (
     integrate,
     resolve_nozzle,
 )
+from ssme_envs.envs.plant_spread import resolve_spread
 from ssme_envs.envs.references import Fault
 from ssme_envs.envs.task import SYNCED, Carrier, Observation, Value, check_number
 from ssme_envs.envs.tracking_env import TrackingEnv
-from ssme_envs.models.nozzle import MAX_SUBSTEPS, NozzleModel, NozzleParameters, integration_substeps
+from ssme_envs.models.nozzle import (
+    MAX_SUBSTEPS,
+    NozzleModel,
+    NozzleParameters,
+    RK4Parameters,
+    integration_substeps,
+)
 
 LAUNCHER_DT = 0.02  # s, a 50 Hz attitude loop
 SERVO_SUBSTEPS = 10  # nozzle servo and integration steps per attitude step: a 500 Hz servo
@@ -38,13 +45,15 @@ OBS_NAMES = LAUNCHER_OBSERVATION.names  # the observation columns, kept for exis
 
 class LauncherState(NamedTuple):
     """A launcher episode's state: the nozzle (angle, rate, hysteresis w: a float tuple, or
-    (3, N)), attitude theta (rad), pitch rate q (rad/s), error integral, previous action."""
+    (3, N)), attitude theta (rad), pitch rate q (rad/s), error integral, previous action, and
+    the episode's drawn joint (None: the task's own)."""
 
     nozzle: Any
     theta: Value
     q: Value
     integral: Value
     prev: Value
+    joint: RK4Parameters | None = None
 
 
 def _from_nozzle(name: str, doc: str) -> property:
@@ -123,6 +132,7 @@ class LauncherTask:
     envelope = _from_nozzle("envelope", "The attitude (rad) that ends an episode.")
     step_cost_bound = _from_nozzle("step_cost_bound", "Largest reward loss of one step inside the envelope.")
     draw_size = _from_nozzle("draw_size", "Uniform float32 numbers one episode consumes.")
+    plant_draw_size = _from_nozzle("plant_draw_size", "The last uniforms of a draw, which draw the joint.")
     shared_references = _from_nozzle("shared_references", "None: references are drawn per episode.")
     rk4_params = _from_nozzle("rk4_params", "The joint's integrator parameters.")
 
@@ -137,6 +147,8 @@ class LauncherTask:
         episode_seconds: float = 10.0,
         instability: float = 3.0,
         effectiveness: float = 12.0,
+        plant_spread: float | str | None = None,
+        uncertainty_scale: float = 1.0,
     ) -> LauncherTask:
         joint, design = resolve_nozzle(plant)
         nozzle = NozzleTask(
@@ -148,6 +160,7 @@ class LauncherTask:
             ),
             dt=LAUNCHER_DT,
             envelope=math.radians(10.0),
+            spread=resolve_spread(plant_spread, joint, plant, uncertainty_scale),
         )
         return cls(
             nozzle=nozzle,
@@ -159,15 +172,19 @@ class LauncherTask:
         object.__setattr__(self, "servo", nozzle_servo_gains(self.plant))
         h = self.dt / self.substeps
         object.__setattr__(self, "body", body_transition(self.instability, self.effectiveness, h))
-        rk4_substeps = integration_substeps(
-            self.plant,
-            h,
-            2.0 * self.max_deflection,  # the nozzle's travel: twice the command range, as NozzleTVC's
-            self.torque_limit,
-            ENV_STEP_RATE,
-            max_substeps=MAX_SUBSTEPS // self.substeps,
-            sample="servo sample",
-        )
+        spread = self.nozzle.spread
+        rk4_substeps = max(
+            integration_substeps(
+                joint,
+                h,
+                2.0 * self.max_deflection,  # the nozzle's travel: twice the command range, as NozzleTVC's
+                self.torque_limit,
+                ENV_STEP_RATE,
+                max_substeps=MAX_SUBSTEPS // self.substeps,
+                sample="servo sample",
+            )
+            for joint in ([self.plant] if spread is None else spread.corners())
+        )  # the worst joint the spread can draw sets the count
         object.__setattr__(self, "rk4_substeps", rk4_substeps)
 
     @classmethod
@@ -182,11 +199,13 @@ class LauncherTask:
         """As the nozzle task's :meth:`~ssme_envs.envs.nozzle_task.NozzleTask.nonfinite_reward`."""
         return self.nozzle.nonfinite_reward(t)
 
-    def initial_state(self, n: int | None = None) -> LauncherState:
-        """At rest on the reference trajectory: floats (``n`` None) or arrays of ``n`` envs."""
+    def initial_state(self, n: int | None = None, plants: np.ndarray | None = None) -> LauncherState:
+        """At rest on the reference trajectory: floats (``n`` None) or arrays of ``n`` envs; the
+        nozzle's joint drawn from ``plants`` as the nozzle task does."""
+        joint = self.nozzle.drawn_joint(n, plants)
         if n is None:
-            return LauncherState((0.0, 0.0, 0.0), 0.0, 0.0, 0.0, 0.0)
-        return LauncherState(np.zeros((3, n)), *(np.zeros(n) for _ in range(4)))
+            return LauncherState((0.0, 0.0, 0.0), 0.0, 0.0, 0.0, 0.0, joint)
+        return LauncherState(np.zeros((3, n)), *(np.zeros(n) for _ in range(4)), joint)
 
     def initial_observation(self, ref: np.ndarray, draws: np.ndarray) -> np.ndarray:
         """Observations at reset (7, N) float32 from the first reference and noise rows (1, N)."""
@@ -202,7 +221,7 @@ class LauncherTask:
     ) -> tuple[LauncherState, tuple, Value, Any]:  # fmt: skip
         """One attitude step, as :class:`~ssme_envs.envs.task.TrackingTask` says: the nozzle
         command in [-1, 1] of 3 deg; returns (state, the 7 observation values, reward, terminated)."""
-        nozzle, theta, q, integral, prev = state
+        nozzle, theta, q, integral, prev, joint = state
         a, ref = action[0], ref[0]
         feedforward, k_p, k_d = self.servo
         drive = feedforward * (a * self.max_deflection)
@@ -213,7 +232,7 @@ class LauncherTask:
             servo_gain = ops.where(t > self.fault_step, fault.magnitude, 1.0)
         p00, p01, p10, p11, g0_theta, g0_q, g1_theta, g1_q = self.body
         h = self.dt / self.substeps
-        params, rk4_steps = self.rk4_params, self.rk4_substeps
+        params, rk4_steps = self.rk4_params if joint is None else joint, self.rk4_substeps
         rk4_h = h / rk4_steps  # h itself for one step
         for _ in range(self.substeps):
             d = nozzle[0]
@@ -230,7 +249,7 @@ class LauncherTask:
             theta, a, prev, t, ref, noise[0], integral, ops
         )
         obs = (m * DEG, q * DEG, ref * DEG, e, integral, nozzle[0] * DEG, a)
-        return LauncherState(nozzle, theta, q, integral, a), obs, reward, terminated
+        return LauncherState(nozzle, theta, q, integral, a, joint), obs, reward, terminated
 
     def render_row(self, state: LauncherState, obs: Sequence[float], ref: Sequence[float]) -> list[float]:
         """The measured attitude (rad), its reference, the nozzle deflection as a fraction of 3 deg."""

@@ -11,6 +11,7 @@ from typing import Any, ClassVar, NamedTuple
 import gymnasium as gym
 import numpy as np
 
+from ssme_envs.envs.plant_spread import PlantSpread, resolve_spread
 from ssme_envs.envs.references import Fault, check_reference, normal_rows, reference_signals, uniforms_needed
 from ssme_envs.envs.task import SYNCED, Carrier, Observation, Value, check_number
 from ssme_envs.models.nozzle import (
@@ -48,13 +49,15 @@ NOZZLE_OBSERVATION = Observation(
 
 class NozzleState(NamedTuple):
     """A nozzle episode's state: plant (angle, rate, hysteresis w: a float tuple, or (3, N)),
-    actuator torque, last measurement, error integral, previous action."""
+    actuator torque, last measurement, error integral, previous action, and the episode's drawn
+    joint (None: the task's own)."""
 
     plant: Any
     torque: Value
     m_prev: Value
     integral: Value
     prev: Value
+    joint: RK4Parameters | None = None
 
 
 def integrate(plant: Any, tau: Value, h: float, steps: int, p: RK4Parameters, ops: Carrier) -> Any:
@@ -151,6 +154,7 @@ class NozzleTask:
     rate_weight: float = 0.1
     envelope: float = math.radians(6.0)  # |angle| that ends an episode (twice the working range)
     integral_limit: float = 10.0  # deg s
+    spread: PlantSpread | None = None  # the joint drawn per episode (None: ``plant`` throughout)
     rk4_params: RK4Parameters = field(init=False, repr=False)  # floats, for both carriers
     fault_step: int = field(init=False)
     # largest reward loss of one step inside the envelope (with 1 deg for noise)
@@ -173,8 +177,12 @@ class NozzleTask:
         actuator_lag: float = 0.0,
         rate_limit: float | None = None,
         substeps: int | None = None,
+        plant_spread: float | str | None = None,
+        uncertainty_scale: float = 1.0,
     ) -> NozzleTask:
         params, design = resolve_nozzle(plant)
+        spread = resolve_spread(plant_spread, params, plant, uncertainty_scale)
+        joints = [params] if spread is None else spread.corners()
         episode = episode_options(
             reference, reference_amplitude_deg, 3.0, sensor_noise, fault, episode_seconds, NOZZLE_DT
         )
@@ -182,14 +190,16 @@ class NozzleTask:
         if rate_limit is not None:
             rate_limit = check_number("rate_limit", rate_limit, 0.0, math.inf, low_open=True)
         envelope = math.radians(6.0)
-        if substeps is None:
-            substeps = integration_substeps(
-                params, NOZZLE_DT, envelope, DEFAULT_TORQUE_LIMIT, ENV_STEP_RATE, sample="step"
+        if substeps is None:  # the worst joint the spread can draw (its corners) sets the count
+            substeps = max(
+                integration_substeps(joint, NOZZLE_DT, envelope, DEFAULT_TORQUE_LIMIT, ENV_STEP_RATE, sample="step")
+                for joint in joints
             )
         elif not isinstance(substeps, int) or isinstance(substeps, bool) or not 1 <= substeps <= MAX_SUBSTEPS:
             raise ValueError(f"substeps must be an integer in 1-{MAX_SUBSTEPS}, got {substeps!r}")
         else:  # the caller's count: accuracy is theirs, stability is checked
-            check_stable_substeps(params, substeps, NOZZLE_DT, envelope, DEFAULT_TORQUE_LIMIT)
+            for joint in joints:
+                check_stable_substeps(joint, substeps, NOZZLE_DT, envelope, DEFAULT_TORQUE_LIMIT)
         return cls(
             plant=params,
             design=design,
@@ -198,6 +208,7 @@ class NozzleTask:
             lag_gain=1.0 if lag == 0 else -math.expm1(-NOZZLE_DT / lag),
             max_torque_change=math.inf if rate_limit is None else rate_limit * NOZZLE_DT,
             envelope=envelope,
+            spread=spread,
         )
 
     def __post_init__(self) -> None:
@@ -222,11 +233,16 @@ class NozzleTask:
         return None
 
     @property
+    def plant_draw_size(self) -> int:
+        """The last uniforms of an episode's draw, which draw its joint (0: a fixed joint)."""
+        return 0 if self.spread is None else self.spread.draw_size
+
+    @property
     def draw_size(self) -> int:
         """Uniform float32 numbers one episode consumes: sensor noise (an even count for the
-        Box-Muller pairs), then the reference's."""
+        Box-Muller pairs), then the reference's, then the joint's (:attr:`plant_draw_size`)."""
         length = self.horizon + 1
-        return length + length % 2 + uniforms_needed(self.reference, length, 1, self.dt)
+        return length + length % 2 + uniforms_needed(self.reference, length, 1, self.dt) + self.plant_draw_size
 
     def episodes(self, uniforms: np.ndarray, start: int, stop: int) -> tuple[np.ndarray, np.ndarray]:
         """The steps [start, stop) of k episodes from their uniforms (draw_size, k) float32, as
@@ -235,17 +251,30 @@ class NozzleTask:
         length = self.horizon + 1
         pairs = length + length % 2
         noise = normal_rows(uniforms, pairs // 2, start, stop)[None]
+        ref_uniforms = uniforms[pairs : pairs + uniforms_needed(self.reference, length, 1, self.dt)]
         refs = reference_signals(
-            self.reference, uniforms[pairs:].astype(np.float64), length, self.amplitude, self.dt, start, stop
+            self.reference, ref_uniforms.astype(np.float64), length, self.amplitude, self.dt, start, stop
         )
         return refs, noise
 
-    def initial_state(self, n: int | None = None) -> NozzleState:
+    def initial_state(self, n: int | None = None, plants: np.ndarray | None = None) -> NozzleState:
         """At rest (the rate estimate starts from the rest angle): floats (``n`` None) or arrays
-        of ``n`` envs."""
+        of ``n`` envs; with a spread, the joints drawn from ``plants`` (plant_draw_size, n or 1)."""
+        joint = self.drawn_joint(n, plants)
         if n is None:
-            return NozzleState((0.0, 0.0, 0.0), 0.0, 0.0, 0.0, 0.0)
-        return NozzleState(np.zeros((3, n)), *(np.zeros(n) for _ in range(4)))
+            return NozzleState((0.0, 0.0, 0.0), 0.0, 0.0, 0.0, 0.0, joint)
+        return NozzleState(np.zeros((3, n)), *(np.zeros(n) for _ in range(4)), joint)
+
+    def drawn_joint(self, n: int | None, plants: np.ndarray | None) -> RK4Parameters | None:
+        """The integrator parameters of the episodes' drawn joints (None without a spread)."""
+        if self.spread is None:
+            return None
+        if plants is None:  # the vector env's tables before any reset: the nominal joint
+            nominal = self.rk4_params
+            return nominal if n is None else RK4Parameters(
+                *(v if isinstance(v, bool) else np.full(n, v) for v in nominal)
+            )  # fmt: skip
+        return self.spread.rk4(plants, self.rk4_params.hysteretic, n)
 
     def initial_observation(self, ref: np.ndarray, draws: np.ndarray) -> np.ndarray:
         """Observations at reset (6, N) float32 from the first reference and noise rows (1, N)."""
@@ -269,7 +298,7 @@ class NozzleTask:
         """One step, as :class:`~ssme_envs.envs.task.TrackingTask` says: the torque command in
         [-1, 1] of full scale, ``ref`` in rad. Returns (state, the 6 observation values, reward,
         terminated)."""
-        plant, torque, m_prev, integral, prev = state
+        plant, torque, m_prev, integral, prev, joint = state
         a, ref = action[0], ref[0]
         cmd = a * self.torque_limit
         fault = self.fault
@@ -281,11 +310,12 @@ class NozzleTask:
         else:
             limit = self.max_torque_change
             torque = torque + ops.clip(target - torque, -limit, limit)
-        plant = integrate(plant, torque, self.dt / self.substeps, self.substeps, self.rk4_params, ops)
+        params = self.rk4_params if joint is None else joint
+        plant = integrate(plant, torque, self.dt / self.substeps, self.substeps, params, ops)
         m, e, integral, reward, terminated = self.score(plant[0], a, prev, t, ref, noise[0], integral, ops)
         rate = (m - m_prev) * (DEG / self.dt)
         obs = (m * DEG, rate, ref * DEG, e, integral, a)
-        return NozzleState(plant, torque, m, integral, a), obs, reward, terminated
+        return NozzleState(plant, torque, m, integral, a, joint), obs, reward, terminated
 
     def score(self, x: Value, a: Value, prev: Value, t: Any, ref: Value, noise: Value, integral: Value,
               ops: Carrier) -> tuple:  # fmt: skip

@@ -104,7 +104,9 @@ class TrackingTask(Protocol):
     (:class:`~ssme_envs.envs.vector.TrackingVectorEnv`) need of a task.
 
     Episodes are drawn from ``draw_size`` uniform float32 numbers per episode (one generator call
-    at reset): ``episodes(uniforms, start, stop)`` turns them (draw_size, k) into the references
+    at reset), the last ``plant_draw_size`` of which (0: none) draw the episode's plant:
+    ``initial_state(n, plants)`` gets them (plant_draw_size, n) and puts the drawn plant in the
+    state. ``episodes(uniforms, start, stop)`` turns them (draw_size, k) into the references
     and unit sensor noise of steps [start, stop), (channels, stop - start, k) each, equal to the
     same steps of the whole episode. The envs ask for the steps as episodes reach them
     (:func:`next_stop`), so that a reset costs the same whatever the episode's length.
@@ -127,11 +129,14 @@ class TrackingTask(Protocol):
     def draw_size(self) -> int: ...
 
     @property
+    def plant_draw_size(self) -> int: ...
+
+    @property
     def shared_references(self) -> np.ndarray | None: ...
 
     def episodes(self, uniforms: np.ndarray, start: int, stop: int) -> tuple[np.ndarray, np.ndarray]: ...
 
-    def initial_state(self, n: int | None = None) -> tuple: ...
+    def initial_state(self, n: int | None = None, plants: np.ndarray | None = None) -> tuple: ...
 
     def initial_observation(self, ref: np.ndarray, noise: np.ndarray) -> np.ndarray: ...
 
@@ -156,11 +161,12 @@ def next_stop(ready: int, length: int) -> int:
 
 
 def set_columns(state: Any, fresh: Any, envs: np.ndarray) -> None:
-    """Write the columns (last axis) ``envs`` of every array of a nested state tuple."""
+    """Write the columns (last axis) ``envs`` of every array of a nested state tuple (entries
+    that are not arrays, such as None or a flag, are the same for every env)."""
     for block, new in zip(state, fresh, strict=True):
         if isinstance(block, tuple):
             set_columns(block, new, envs)
-        else:
+        elif isinstance(block, np.ndarray):
             block[..., envs] = new
 
 

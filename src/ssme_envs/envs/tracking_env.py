@@ -113,7 +113,8 @@ class TrackingEnv(gym.Env):
         refs, noise = self._extend()
         obs = task.initial_observation(refs[:, 0], noise[:, 0])[:, 0]
         obs = np.clip(obs, self._low, self._high)
-        self._state = task.initial_state()
+        m = task.plant_draw_size  # the last uniforms of the draw: the episode's plant
+        self._state = task.initial_state(None, self._uniforms[task.draw_size - m :] if m else None)
         self._t = 0
         if self.render_mode:
             self._history = [task.render_row(self._state, obs.tolist(), self._refs[0])]

@@ -176,13 +176,15 @@ class TrackingVectorEnv(VectorEnv):
     def _restart(self, envs: np.ndarray) -> np.ndarray:
         """Zero the state of the given envs and draw their next episodes; their first observations."""
         task, k = self.task, len(envs)
-        if k == self.num_envs:
-            self._state = task.initial_state(k)
-        else:
-            set_columns(self._state, task.initial_state(k), envs)
         rngs, rows, single = self._rngs, self._draw_rows, np.float32
         for i in envs.tolist():  # positional arguments: half the cost of the keywords per call
             rngs[i].random(None, single, rows[i])
+        m = task.plant_draw_size  # the last uniforms of each draw: the episode's plant
+        plants = self._draws[envs, task.draw_size - m :].T if m else None
+        if k == self.num_envs:
+            self._state = task.initial_state(k, plants)
+        else:
+            set_columns(self._state, task.initial_state(k, plants), envs)
         self._t[envs] = 0
         if k == self.num_envs:
             self._t_bound = 0
