@@ -55,6 +55,13 @@ def _lq_tracker(env: Any, design: str) -> LQIServo:
     return servo
 
 
+def _robust(env: Any, design: str) -> Controller:
+    """The LQ servo tuned for a spread of plants (agents.robust; imported when used)."""
+    from agents.robust import RobustLQI
+
+    return RobustLQI(env, design)
+
+
 def _shipped_ppo(env: Any, design: str) -> Controller:
     """The PPO policy shipped for the env, trained on its full truth (``design="truth"``) or, for
     EngineTracking, on the identified model (``"identified"``)."""
@@ -63,6 +70,9 @@ def _shipped_ppo(env: Any, design: str) -> Controller:
     return PolicyController(shipped_policy(env_id_of(env), design))
 
 
+# shipped policies trained on other than the identified model or the truth: ``ppo:spread``, trained
+# with the plant drawn per episode (plant_spread=0.2)
+POLICY_VARIANTS = ("spread",)
 # name -> (factory(env, design), the env ids it serves, the design model when none is named)
 CONTROLLERS: dict[str, tuple[Callable[[Any, str], Controller], tuple[str, ...], str]] = {
     "zero": (ZeroAction, tuple(ENVS), "identified"),  # the baseline of every env
@@ -73,6 +83,7 @@ CONTROLLERS: dict[str, tuple[Callable[[Any, str], Controller], tuple[str, ...], 
     "pid": (PlacedPID, (NOZZLE, LAUNCHER), "identified"),
     "hysteresis": (_compensated, (NOZZLE,), "identified"),
     "lq": (_lq_tracker, (TRACKING,), "identified"),
+    "robust": (_robust, (NOZZLE, LAUNCHER), "identified"),
     # learned on the truth by default: a policy is trained on an env, not designed on a model
     "ppo": (_shipped_ppo, (TRACKING, THROTTLE, NOZZLE), "truth"),
 }
@@ -91,7 +102,8 @@ def parse_controller(spec: str, env_id: str, allow_pickle: bool = False) -> Call
     ----------
     spec : str
         ``name`` or ``name:design`` (design: identified, truth; for ``ppo`` the plant the shipped
-        policy was trained on), or ``algo:PATH`` (algo: ppo, sac, td3) for the run directory of
+        policy was trained on, or ``spread``: NozzleTVC's policy trained on plants drawn per
+        episode), or ``algo:PATH`` (algo: ppo, sac, td3) for the run directory of
         ``ssme-envs train`` (write ``ppo:./truth`` for a directory named like a design).
     env_id : str
         The env the controller is for.
@@ -100,7 +112,7 @@ def parse_controller(spec: str, env_id: str, allow_pickle: bool = False) -> Call
         arbitrary code.
     """
     name, _, design = spec.partition(":")
-    if name in ALGOS and design and design not in DESIGN_SOURCES:
+    if name in ALGOS and design and design not in (*DESIGN_SOURCES, *POLICY_VARIANTS):
         return _trained(name, design, env_id, allow_pickle)
     valid = controller_names(env_id)
     if name not in valid:
@@ -109,7 +121,7 @@ def parse_controller(spec: str, env_id: str, allow_pickle: bool = False) -> Call
             f"unknown controller {spec!r} for {env_id}; choose from {', '.join(valid)} or {trained}"
         )
     design = design or CONTROLLERS[name][2]
-    if design not in DESIGN_SOURCES:
+    if design not in DESIGN_SOURCES and not (name == "ppo" and design in POLICY_VARIANTS):
         raise ValueError(
             f"unknown design model {design!r} in {spec!r}; choose from {', '.join(DESIGN_SOURCES)}"
         )
@@ -136,6 +148,7 @@ def make_controller(spec: str, env: Any, env_id: str | None = None, allow_pickle
 __all__ = [
     "CONTROLLERS",
     "MPC",
+    "POLICY_VARIANTS",
     "BatchController",
     "Controller",
     "DecoupledPI",

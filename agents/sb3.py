@@ -57,11 +57,18 @@ CONFIG_KEYS = {
     "env_options": dict,
     "hyperparameters": dict,
     "policy": dict,
+    "init_policy": str,  # a policy directory whose weights and normalization start the training
 }
 DEFAULTS = {"steps": 200_000, "seed": 0, "num_envs": 64, "eval_freq": 50_000, "eval_episodes": 20,
             "tensorboard": False, "env_options": {}, "hyperparameters": {}, "policy": {}}  # fmt: skip
 # the shipped policies: trained on each env's full truth, and on EngineTracking's identified model
-SHIPPED = ("EngineTracking-v0", "EngineTracking-v0-identified", "EngineThrottle-v0", "NozzleTVC-v0")
+SHIPPED = (
+    "EngineTracking-v0",
+    "EngineTracking-v0-identified",
+    "EngineThrottle-v0",
+    "NozzleTVC-v0",
+    "NozzleTVC-v0-spread",  # trained with plant_spread=0.2 (experiments/configs/ppo_nozzle_tvc_spread.toml)
+)
 
 
 def check_config(config: dict[str, Any], source: str = "config") -> dict[str, Any]:
@@ -233,6 +240,8 @@ def train(config: dict[str, Any], out: Path, progress: bool = True) -> dict[str,
         )  # fmt: skip
     except (AssertionError, ValueError) as exc:  # SB3 checks hyperparameter values with asserts
         raise ValueError(f"hyperparameters: {exc}") from None
+    if "init_policy" in config:
+        _start_from(model, venv, config["init_policy"], algo, env_id)
     history: list[dict[str, Any]] = []
     best: dict[str, Any] = {"return": -math.inf}
 
@@ -278,6 +287,22 @@ def train(config: dict[str, Any], out: Path, progress: bool = True) -> dict[str,
     write_atomic(out / "config.toml", _toml(config))
     write_atomic(out / "training.json", json.dumps(summary, indent=1) + "\n")
     return summary
+
+
+def _start_from(model: Any, venv: Any, path: str, algo: str, env_id: str) -> None:
+    """Start ``model`` (and ``venv``'s observation statistics) from a trained policy directory
+    of the same algorithm, env and network (fine-tuning); ValueError naming a mismatch."""
+    loaded = load_trained(path, algo)
+    if loaded.env_id != env_id:
+        raise ValueError(f"init_policy {path}: trained on {loaded.env_id}, not {env_id}")
+    mine, theirs = model.policy.state_dict(), loaded.policy.state_dict()
+    if {k: v.shape for k, v in mine.items()} != {k: v.shape for k, v in theirs.items()}:
+        raise ValueError(f"init_policy {path}: its network differs from policy.net_arch of this config")
+    model.policy.load_state_dict(theirs)
+    if loaded.normalization is not None:
+        venv.obs_rms.mean = loaded.normalization.mean.copy()
+        venv.obs_rms.var = loaded.normalization.var.copy()
+        venv.obs_rms.count = loaded.normalization.count
 
 
 def _progress_bar() -> Any:

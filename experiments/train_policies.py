@@ -30,6 +30,7 @@ SHIP = {
     "ppo_engine_tracking_identified": "EngineTracking-v0-identified",
     "ppo_engine_throttle": "EngineThrottle-v0",
     "ppo_nozzle_tvc": "NozzleTVC-v0",
+    "ppo_nozzle_tvc_spread": "NozzleTVC-v0-spread",  # after ppo_nozzle_tvc: it starts from that policy
 }
 # the scenarios of the plant each config trains on (then the full truth's)
 PLANT = {
@@ -39,6 +40,7 @@ PLANT = {
     "ppo_engine_throttle": ("mission",),
     "ppo_nozzle_tvc": ("random_steps", "step", "sine_sweep", "attitude"),
     "ppo_nozzle_tvc_mixed": ("random_steps", "step", "sine_sweep", "attitude"),
+    "ppo_nozzle_tvc_spread": ("random_steps", "step", "sine_sweep", "attitude"),
 }
 TRUTH = {"ssme_envs/EngineTracking-v0": "noise", "ssme_envs/EngineThrottle-v0": "mission",
          "ssme_envs/NozzleTVC-v0": "random_steps"}  # fmt: skip

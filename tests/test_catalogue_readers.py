@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from agents import CONTROLLERS, controller_names
+from agents import CONTROLLERS, POLICY_VARIANTS, controller_names
 from agents.sb3 import SHIPPED
 from ssme_envs.envs import catalogue
 from ssme_envs.evaluation import SCENARIOS, TRACKED, layout_of
@@ -43,7 +43,9 @@ def test_only_catalogue_ids_are_named():
     ids = set(catalogue.ENVS)
     for name, (_, env_ids, _) in CONTROLLERS.items():
         assert set(env_ids) <= ids, name
-    assert {f"ssme_envs/{name.removesuffix('-identified')}" for name in SHIPPED} <= ids
+    trained_on = ("identified", *POLICY_VARIANTS)  # the suffixes of policies not trained on the truth
+    env_names = {n.rsplit("-", 1)[0] if n.rsplit("-", 1)[-1] in trained_on else n for n in SHIPPED}
+    assert {f"ssme_envs/{name}" for name in env_names} <= ids
     sys.path.insert(0, str(ROOT / "experiments"))
     try:
         train_policies = pytest.importorskip("train_policies")

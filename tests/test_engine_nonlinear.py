@@ -180,3 +180,31 @@ def test_pipeline_identifies_and_validates_one_level(engine):
         values = np.array([result.validation[record][kind]["see"] for kind in ("model", "filter")])
         assert np.all(np.isfinite(values)) and np.all(values > 0) and np.all(values < 1)
     assert result.identified.model.spectral_radius() < 1.0
+
+
+@pytest.mark.parametrize("power", POWER_LEVELS)
+def test_linear_model_is_table_one_at_its_levels(engine, power):
+    """The engine's linearization about its trim (the envs' "truth" design model on this plant)
+    is Table I's model at each Table I level, lambda included."""
+    linear, table = engine.linear_model(power), published_model(power)
+    np.testing.assert_allclose(linear.A, table.A, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(linear.B, table.B, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(linear.lam, table.lam, rtol=0, atol=1e-12)
+    assert linear.observability_indices == table.observability_indices
+    with pytest.raises(ValueError, match="power"):
+        engine.linear_model(60.0)
+
+
+def test_pipeline_report_section_states_the_amplitude_and_the_papers_numbers(engine, tmp_path):
+    from ssme_envs.identification.engine_nonlinear_pipeline import nonlinear_into
+    from ssme_envs.identification.report import markov_difference
+
+    (tmp_path / "report.md").write_text("# Report\n")
+    text = nonlinear_into(tmp_path).read_text()
+    assert text.startswith("# Report\n\n## The nonlinear engine truth")
+    assert "beta_opov within +-0.02, beta_fpov within +-0.015" in text  # step_ramp_test_signal's peaks
+    assert "| filter | pc | 0.0123 / " in text  # Table II, 70 %, figure 3 test: the paper's number first
+    assert markov_difference(published_model(90), published_model(90)) == 0.0
+    shifted = published_model(90)
+    shifted.B[:] *= 1.1  # every Markov parameter 10 % larger
+    assert markov_difference(published_model(90), shifted) == pytest.approx(0.1, rel=1e-12)

@@ -53,7 +53,10 @@ def test_metrics_by_hand():
     times = np.arange(1, 11) * dt
     assert pc["itae"] == pytest.approx((0.5 * dt * times.sum() + 0.5 * dt * times[:5].sum()) / 2)
     assert m["actuators"]["OPOV"]["reversals"] == pytest.approx(3 / 2)
-    assert m["actuators"]["FPOV"]["saturated_steps"] == pytest.approx(1 / 2)
+    # time at the limit counts the applied actions: OPOV sits at 1 for 4 of episode 1's 10 steps,
+    # never in episode 2's 5; FPOV's request of 1.5 was never applied
+    assert m["actuators"]["OPOV"]["time_at_limit"] == pytest.approx((4 / 10 + 0 / 5) / 2)
+    assert m["actuators"]["FPOV"]["time_at_limit"] == 0.0
 
 
 def test_a_nan_controller_is_named_with_its_step():

@@ -91,11 +91,11 @@ def test_each_algorithm_trains_saves_and_acts(algo, tmp_path):
 
 @pytest.mark.parametrize("name", SHIPPED)
 def test_shipped_policies_load_and_beat_the_zero_action(name):
-    env_id = "ssme_envs/" + name.removesuffix("-identified")
-    trained_on = "identified" if name.endswith("-identified") else "truth"
+    env_name, _, suffix = name.partition("-v0")
+    env_id, trained_on = f"ssme_envs/{env_name}-v0", suffix.removeprefix("-") or "truth"
     files = sorted(p.name for p in shipped_policy(env_id, trained_on).iterdir())
     assert files == RUN_FILES
-    scenario = {"EngineThrottle-v0": "mission", "NozzleTVC-v0": "random_steps"}.get(name, "noise")
+    scenario = {"EngineThrottle": "mission", "NozzleTVC": "random_steps"}.get(env_name, "noise")
     factories = {
         "zero": parse_controller("zero", env_id),
         "ppo": parse_controller(f"ppo:{trained_on}", env_id),
@@ -172,3 +172,29 @@ def test_the_documented_5000_step_runs_train_and_score(algo, tmp_path):
     assert main(args) == 0
     scored = json.loads((tmp_path / "eval" / "results.json").read_text())["scenarios"]
     assert all(np.isfinite(scored[scenario][f"{algo}:{out}"]["cost_mean"]) for scenario in scored)
+
+
+def test_init_policy_starts_from_a_trained_run(tmp_path):
+    """``init_policy`` loads a run's weights before training: with a zero learning rate the new
+    run's weights are the old run's, bit for bit; a run of another env or network is refused."""
+    from safetensors.numpy import load_file
+
+    base = (f'env = "{TRACKING}"\nalgo = "ppo"\nnum_envs = 4\neval_freq = 256\neval_episodes = 2\n'
+            "[env_options]\nepisode_seconds = 2.0\n[policy]\nnet_arch = [8, 8]\n")  # fmt: skip
+    first = tmp_path / "first.toml"
+    first.write_text(base + "[hyperparameters]\nn_steps = 64\nbatch_size = 64\n")
+    assert main(["train", "--config", str(first), "--steps", "256", "--out", str(tmp_path / "a")]) == 0
+    second = tmp_path / "second.toml"
+    hyper = "[hyperparameters]\nn_steps = 64\nbatch_size = 64\nlearning_rate = 0.0\n"
+    second.write_text(f'init_policy = "{tmp_path / "a"}"\n' + base + hyper)
+    assert (
+        main(
+            ["train", "--config", str(second), "--steps", "256", "--seed", "5", "--out", str(tmp_path / "b")]
+        )
+        == 0
+    )
+    a, b = (load_file(tmp_path / run / "policy.safetensors") for run in ("a", "b"))
+    assert sorted(a) == sorted(b) and all(np.array_equal(a[k], b[k]) for k in a)
+    wider = tmp_path / "wider.toml"
+    wider.write_text(second.read_text().replace("[8, 8]", "[8, 16]"))
+    assert main(["train", "--config", str(wider), "--steps", "256", "--out", str(tmp_path / "c")]) == 2

@@ -23,8 +23,8 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from ssme_envs.cli_checks import (
+    check_count,
     check_seed,
-    check_training,
     check_vector_sizes,
     error_line,
     one_line,
@@ -36,6 +36,7 @@ from ssme_envs.cli_identify import identify_nozzle as _identify_nozzle
 from ssme_envs.cli_identify import names as _names
 from ssme_envs.cli_identify import noting_replacement
 from ssme_envs.cli_identify import validate_engine as _validate_engine
+from ssme_envs.cli_learn import add_learning_commands, train_command, tune_command
 from ssme_envs.outputs import run_directory, write_text
 
 OUTPUT_NOTE = (
@@ -193,31 +194,27 @@ def build_parser() -> argparse.ArgumentParser:
         "execute arbitrary code (use only for files you trust)",
     )
     evaluate.add_argument("--scenario", help="comma-separated scenario names (default: all of the env's)")
+    evaluate.add_argument("--episodes", type=int, help="episodes per scenario (default: 20)")
     evaluate.add_argument(
-        "--episodes", type=int, default=20, help="episodes per scenario (default: %(default)s)"
+        "--monte-carlo",
+        type=int,
+        metavar="N",
+        help="robustness: run each controller over N plants drawn per episode with --plant-spread "
+        "(NozzleTVC, LauncherPitch) and write robustness.md (mean, worst case, CVaR 90 %% per "
+        "controller, the nominal plant's mean beside); replaces --episodes",
+    )
+    evaluate.add_argument(
+        "--plant-spread",
+        default=None,
+        help="with --monte-carlo: a relative spread of the joint's parameters (log-normal, e.g. 0.2, "
+        "the default) or 'uncertainty' (the covariance of the model.json the env's plant comes from)",
     )
     evaluate.add_argument(
         "--seed", type=int, default=0, help="seed of the first episode (default: %(default)s)"
     )
     evaluate.add_argument("--out", type=Path, required=True, help="output directory")
 
-    train = commands.add_parser(
-        "train",
-        help="train a stable-baselines3 agent on an env (policy.json, policy.safetensors, normalization, "
-        "config; no pickle)",
-    )
-    train.add_argument("--env", help="env id (or 'env' in the config)")
-    train.add_argument("--algo", help="ppo, sac or td3 (or 'algo' in the config)")
-    train.add_argument(
-        "--steps",
-        type=int,
-        help="environment steps, rounded up to whole rollouts (a line says so) (default: the config's, "
-        "else 200000)",
-    )
-    train.add_argument("--seed", type=int, help="seed (default: the config's, else 0)")
-    train.add_argument("--config", type=Path, help="TOML config (hyperparameters, env options, ...)")
-    train.add_argument("--tensorboard", action="store_true", help="write TensorBoard logs under --out")
-    train.add_argument("--out", type=Path, required=True, help="output directory")
+    add_learning_commands(commands)
 
     report = commands.add_parser(
         "report",
@@ -311,41 +308,29 @@ def _bench(args: argparse.Namespace) -> int:
 def _evaluate(args: argparse.Namespace) -> int:
     from ssme_envs.evaluation import check_env_id
     from ssme_envs.pipelines import evaluate_to
+    from ssme_envs.robustness import DEFAULT_SPREAD
 
     env_id = check_env_id(args.env)
     check_seed(args.seed)
     scenarios = None if args.scenario is None else _names(args.scenario, "--scenario")
     controllers = None if args.controllers is None else _names(args.controllers, "--controllers")
     command = "ssme-envs " + " ".join(sys.argv[1:]) if sys.argv[1:2] == ["evaluate"] else "ssme-envs evaluate"
+    robust = {}
+    if args.monte_carlo is not None:
+        if args.episodes is not None:
+            raise ValueError("give --episodes or --monte-carlo N (N plants, one per episode), not both")
+        check_count("--monte-carlo", args.monte_carlo)
+        robust = {"monte_carlo": args.monte_carlo, "plant_spread": args.plant_spread or DEFAULT_SPREAD}
+    elif args.plant_spread is not None:
+        raise ValueError("--plant-spread applies with --monte-carlo N")
+    episodes = 20 if args.episodes is None else args.episodes
     with noting_replacement(args.out):
-        evaluate_to(args.out, env_id, controllers, scenarios, args.episodes, args.seed,
-                    allow_pickle=args.allow_pickle, command=command, progress=_to_stderr)  # fmt: skip
-    print(f"wrote {args.out / 'results.md'}, {args.out / 'results.json'} and the plots")
-    return 0
-
-
-def _train(args: argparse.Namespace) -> int:
-    from agents.sb3 import check_config, load_config, train
-    from ssme_envs.evaluation import check_env_id
-
-    config = load_config(args.config) if args.config is not None else {}
-    overrides = {"env": args.env, "algo": args.algo, "steps": args.steps, "seed": args.seed}
-    config.update({k: v for k, v in overrides.items() if v is not None})
-    if args.tensorboard:
-        config["tensorboard"] = True
-    config = check_config(config, str(args.config or "options"))
-    check_env_id(config["env"])  # before the output directory is made
-    check_training(config)
-    _make_dir(args.out)
-    summary = train(config, args.out)
-    kept = summary["kept"]
-    which = "final policy" if kept["model"] == "final" else "best evaluation's policy"
-    print(
-        f"trained {summary['algo']} on {summary['env']}: {summary['steps']:,} steps in "
-        f"{summary['seconds']:.0f} s ({summary['steps_per_s']:,.0f} steps/s); kept the {which} "
-        f"({kept['steps']:,} steps, evaluation return {summary['best_return']:.3f}); "
-        f"wrote {args.out / 'policy.json'}, policy.safetensors and normalization.json"
-    )
+        evaluate_to(
+            args.out, env_id, controllers, scenarios, episodes, args.seed,
+            allow_pickle=args.allow_pickle, command=command, progress=_to_stderr, **robust,
+        )  # fmt: skip
+    extra = f", {args.out / 'robustness.md'}" if robust else ""
+    print(f"wrote {args.out / 'results.md'}, {args.out / 'results.json'}{extra} and the plots")
     return 0
 
 
@@ -363,13 +348,6 @@ def _to_stderr(message: str) -> None:
     print(message, file=sys.stderr)
 
 
-def _make_dir(path: Path) -> None:
-    try:
-        path.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise ValueError(f"cannot create output directory {path}: {exc.strerror}") from None
-
-
 def _dispatch(args: argparse.Namespace) -> int:
     if args.command == "identify":
         return (_identify_engine if args.plant == "engine" else _identify_nozzle)(args)
@@ -379,9 +357,11 @@ def _dispatch(args: argparse.Namespace) -> int:
         return _evaluate(args)
     if args.command == "report":
         return _report(args)
+    if args.command == "tune":
+        return tune_command(args)
     if args.command == "train":  # locked; train writes into --out itself
         with run_directory(args.out, stage=False):
-            return _train(args)
+            return train_command(args)
     if args.command == "validate" and args.plant == "engine":
         return _validate_engine(args)
     raise _UsageError(f"unknown command {args.command}")  # pragma: no cover

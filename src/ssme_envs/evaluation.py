@@ -17,6 +17,8 @@ import gymnasium as gym
 import numpy as np
 
 from ssme_envs.evaluation_result import ActuatorMetrics, ControllerMetrics, EvaluationResult, OutputMetrics
+from ssme_envs.metrics import limit_cycle, saturation_fraction
+from ssme_envs.robustness import cvar
 
 NOISE_OFF = {"backlash": 5e-4, "stiction": 2e-4, "sensor_noise": 0.0}
 LINEAR = {"asymmetric_gains": False, "backlash": 0.0, "stiction": 0.0, "sensor_noise": 0.0}
@@ -35,11 +37,15 @@ SCENARIOS: dict[str, dict[str, dict[str, Any]]] = {
         "stuck_valve": {"fault": {"kind": "stuck_valve", "time": 4.0, "index": 0}},
         "gain_loss": {"fault": {"kind": "gain_loss", "time": 4.0, "index": 1, "magnitude": 0.5}},
         "sensor_bias": {"fault": {"kind": "sensor_bias", "time": 4.0, "index": 0, "magnitude": 0.002}},
+        "nonlinear": {"plant": "nonlinear"},  # the full truth's effects on the nonlinear engine
+        "bucket": {"power": 67.0},  # the full truth in the max-q bucket, between the Table I levels
+        "nonlinear_bucket": {"plant": "nonlinear", "power": 67.0},
     },
     "ssme_envs/EngineThrottle-v0": {
         "mission": {},
         "mission_noise_off": {"truth": NOISE_OFF},
         "mission_linear": {"truth": LINEAR},
+        "mission_nonlinear": {"plant": "nonlinear"},  # scheduled on its own chamber pressure
     },
     "ssme_envs/NozzleTVC-v0": {
         "step": {"reference": "step", "sensor_noise": 0.0},
@@ -142,14 +148,16 @@ def check_scenarios(env_id: str, names: Sequence[str]) -> list[str]:
     return list(names)
 
 
-def make_env(env_id: str, scenario: str, num_envs: int) -> gym.vector.VectorEnv:
-    """The native vector env of a scenario."""
+def make_env(
+    env_id: str, scenario: str, num_envs: int, options: Mapping[str, Any] | None = None
+) -> gym.vector.VectorEnv:
+    """The native vector env of a scenario, with ``options`` (env keyword options) on top of the
+    scenario's own."""
     check_scenarios(env_id, [scenario])
     import ssme_envs  # noqa: F401  (registers the environments)
 
-    return gym.make_vec(
-        env_id, num_envs=num_envs, vectorization_mode="vector_entry_point", **SCENARIOS[env_id][scenario]
-    )
+    kwargs = {**SCENARIOS[env_id][scenario], **(options or {})}
+    return gym.make_vec(env_id, num_envs=num_envs, vectorization_mode="vector_entry_point", **kwargs)
 
 
 @dataclass
@@ -220,15 +228,10 @@ def step_metrics(t: np.ndarray, y: np.ndarray, final: float | None = None, thres
     return {"rise_time": float(rise), "settling_time": float(settling), "overshoot": float(overshoot)}
 
 
-def _cvar(costs: np.ndarray, level: float = 0.9) -> float:
-    """Mean of the worst (1 - level) share of the costs (at least one)."""
-    worst = np.sort(costs)[::-1][: max(1, round((1 - level) * len(costs)))]
-    return float(worst.mean())
-
-
 def metrics(run: Rollout, layout: Layout) -> ControllerMetrics:
-    """Per-output tracking and step metrics (means over episodes), actuator wear and limits,
-    and the episode cost (minus the return): mean, std, CVaR 90 %."""
+    """Per-output tracking, step and limit-cycle metrics (over episodes), actuator wear and time
+    at the limits (of the applied actions), and the episode cost (minus the return): mean, std,
+    CVaR 90 %."""
     alive = run.alive
     steps = alive.sum(axis=0)
     returns = (run.rewards * alive).sum(axis=0)
@@ -236,6 +239,7 @@ def metrics(run: Rollout, layout: Layout) -> ControllerMetrics:
     t = np.arange(1, len(alive) + 1) * run.dt
     outputs: dict[str, OutputMetrics] = {}
     step_rows = run.obs[1:]
+    references = step_rows[:, :, list(layout.reference_columns)]  # (T, N, outputs)
     for i, name in enumerate(layout.outputs):
         e = np.abs(step_rows[:, :, layout.error_columns[i]]) * alive
         y = step_rows[:, :, layout.output_columns[i]]
@@ -247,6 +251,7 @@ def metrics(run: Rollout, layout: Layout) -> ControllerMetrics:
             itae=float(((t[:, None] * e).sum(axis=0) * run.dt).mean()),
             steady_state_error=float(e[-tail:].mean()),
             **_step_response(t, y, r, alive),
+            **_limit_cycles(step_rows[:, :, layout.error_columns[i]], references, alive, run.dt),
         )
     change = np.diff(run.actions, axis=0, prepend=0.0)
     moving = np.abs(change) > 1e-3
@@ -261,18 +266,34 @@ def metrics(run: Rollout, layout: Layout) -> ControllerMetrics:
             effort_rms=float(np.sqrt((run.actions[:, :, j] ** 2 * alive).sum() / alive.sum())),
             travel=float((np.abs(change[:, :, j]) * alive).sum(axis=0).mean()),
             reversals=float(np.mean(reversals)),
-            saturated_steps=float(((np.abs(run.requested[:, :, j]) > 1.0) & alive).sum(axis=0).mean()),
+            time_at_limit=float(saturation_fraction(run.actions[:, :, j], alive).mean()),
         )
     return ControllerMetrics(
         episodes=int(alive.shape[1]),
         return_mean=float(returns.mean()),
         return_std=float(returns.std()),
         cost_mean=float(costs.mean()),
-        cost_cvar90=_cvar(costs),
+        cost_cvar90=cvar(costs, 0.9),
         terminations=int((steps < len(alive)).sum()),
         outputs=outputs,
         actuators=actuators,
     )
+
+
+def _limit_cycles(err: np.ndarray, refs: np.ndarray, alive: np.ndarray, dt: float) -> dict[str, float]:
+    """The limit-cycle fields of :class:`OutputMetrics` from the error (T, N), the references
+    (T, N, k) (a change of any starts a new window) and alive (T, N); NaN where no episode gives
+    them."""
+    runs = [limit_cycle(err[:, i], alive[:, i], dt, refs[:, i]) for i in range(err.shape[1])]
+    tested = [run for run in runs if run.tested]
+    cycles = [run for run in tested if run.found]
+    nan = float("nan")
+    return {
+        "limit_cycle_fraction": len(cycles) / len(tested) if tested else nan,
+        "limit_cycle_period": float(np.median([c.period for c in cycles])) if cycles else nan,
+        "limit_cycle_amplitude": float(np.median([c.amplitude for c in cycles])) if cycles else nan,
+        "limit_cycle_longest_period": float(np.median([r.longest_period for r in tested])) if tested else nan,
+    }
 
 
 def _step_response(t: np.ndarray, y: np.ndarray, r: np.ndarray, alive: np.ndarray) -> dict[str, float]:
@@ -305,6 +326,7 @@ def evaluate(
     episodes: int = 20,
     seed: int = 0,
     progress: Callable[[str], None] | None = None,
+    options: Mapping[str, Any] | None = None,
 ) -> EvaluationResult:
     """Metrics of every controller on every scenario, with one rollout per pair for plotting.
 
@@ -322,6 +344,9 @@ def evaluate(
         Seed of the first episode; the same for every controller.
     progress : callable, optional
         Receives one line per finished pair.
+    options : mapping, optional
+        Env options added to every scenario's (e.g. ``{"plant_spread": 0.2}``: each episode on a
+        plant of its own, see :mod:`ssme_envs.robustness`).
 
     Returns
     -------
@@ -340,7 +365,7 @@ def evaluate(
     for scenario in names:
         for name, factory in controllers.items():
             start = time.perf_counter()
-            env = make_env(env_id, scenario, episodes)
+            env = make_env(env_id, scenario, episodes, options)
             run = rollout(env, factory(env), name, seed)
             env.close()
             scores = metrics(run, layout)

@@ -48,6 +48,16 @@ class OutputMetrics(_ByName):
         Mean absolute error over the last 10 % of the episode.
     rise_time, settling_time, overshoot : float
         Step metrics over the episodes whose reference is one step (NaN when there is none).
+    limit_cycle_fraction : float
+        Share (0-1) of the episodes with a persistent oscillation of the error while the
+        references hold still (:func:`ssme_envs.metrics.limit_cycle`), among those with a window
+        long enough to test (NaN when none had one).
+    limit_cycle_period, limit_cycle_amplitude : float
+        Median period (s) and sine-equivalent amplitude (the output's unit) over the episodes
+        with one (NaN when none).
+    limit_cycle_longest_period : float
+        Median over the tested episodes of the longest period their windows could show, s: no
+        limit cycle found means none up to it (NaN when none was tested).
     """
 
     iae: float
@@ -57,17 +67,31 @@ class OutputMetrics(_ByName):
     rise_time: float
     settling_time: float
     overshoot: float
+    limit_cycle_fraction: float
+    limit_cycle_period: float
+    limit_cycle_amplitude: float
+    limit_cycle_longest_period: float
 
 
 @dataclass(frozen=True)
 class ActuatorMetrics(_ByName):
-    """Wear and limits of one actuator: RMS effort, travel, reversals and saturated steps per
-    episode."""
+    """Wear and limits of one actuator, means over the episodes.
+
+    Attributes
+    ----------
+    effort_rms : float
+        RMS of the applied action (fraction of full scale) over the alive steps.
+    travel, reversals : float
+        Summed absolute moves and changes of direction per episode.
+    time_at_limit : float
+        Share (0-1) of each episode's alive steps at which the applied action sits at +-1
+        (within :data:`ssme_envs.metrics.AT_LIMIT_TOL` of full scale), averaged.
+    """
 
     effort_rms: float
     travel: float
     reversals: float
-    saturated_steps: float
+    time_at_limit: float
 
 
 @dataclass(frozen=True)

@@ -37,6 +37,19 @@ REPORT_PLAN: dict[str, tuple[str, list[str]]] = {
     LAUNCHER: ("zero,pid,lqi", ["step", "attitude", "random_steps", "linear_nozzle"]),
 }
 
+# env -> (controllers, scenarios) run over drawn plants (plant_spread, DEFAULT_SPREAD), PLANTS_PER_EPISODE
+# times the report's --episodes plants: 200 by default
+ROBUSTNESS_PLAN: dict[str, tuple[str, list[str]]] = {
+    NOZZLE: ("zero,pid,lqi,robust,hysteresis,ppo,ppo:spread", ["random_steps", "sine_sweep"]),
+    LAUNCHER: ("zero,pid,lqi,robust", ["random_steps", "attitude"]),
+}
+PLANTS_PER_EPISODE = 10
+
+
+def robustness_folder(env_id: str) -> str:
+    """The report's folder of an env's robustness run."""
+    return env_id.split("/")[-1] + "-robustness"
+
 
 def _embedded(path: Path, folder: str) -> list[str]:
     """A sub-report's lines, headings one level down and figure paths into its folder."""
@@ -208,6 +221,24 @@ def write_main_report(
             costs = ", ".join(f"{c} {m.cost_mean:.3f}" for c, m in results[scenario].items())
             lines.append(f"- {scenario}: cost {costs}")
         lines.append("")
+    robust = [
+        env_id for env_id in ROBUSTNESS_PLAN if (out / robustness_folder(env_id) / "robustness.md").exists()
+    ]
+    if robust:
+        lines += [
+            "## Robustness: plants drawn per episode",
+            "",
+            "Each controller over the same plants, drawn per episode with the nozzle joint's parameters "
+            "spread (log-normal, relative 0.2, +-3 sigma; J, b, k_el, k_hys, beta_n, gamma_n), designed on "
+            "the nominal identified model. `robust` is the LQ servo with its weights chosen for the "
+            "smallest CVaR over 64 plants drawn around the *design* model (agents/robust.py); "
+            "`ppo:spread` the PPO policy trained with the plant drawn per episode, `ppo` the one trained "
+            "on the nominal plant.",
+            "",
+        ]
+        for env_id in robust:
+            folder = robustness_folder(env_id)
+            lines += [*_embedded(out / folder / "robustness.md", folder)[1:], ""]
     lines += ["## Identification", ""]
     for folder in ("engine", "nozzle"):
         if (out / folder / "report.md").exists():
@@ -217,4 +248,13 @@ def write_main_report(
     return path
 
 
-__all__ = ["REPORT_PLAN", "engine_tables", "nozzle_tables", "rl_table", "write_main_report"]
+__all__ = [
+    "PLANTS_PER_EPISODE",
+    "REPORT_PLAN",
+    "ROBUSTNESS_PLAN",
+    "engine_tables",
+    "nozzle_tables",
+    "rl_table",
+    "robustness_folder",
+    "write_main_report",
+]

@@ -28,7 +28,9 @@ from ssme_envs.identification.jobs import (  # the identification arrows, re-exp
     nozzle_into,
     validate_engine,
 )
+from ssme_envs.main_report import PLANTS_PER_EPISODE, robustness_folder
 from ssme_envs.outputs import output_directory
+from ssme_envs.robustness import DEFAULT_SPREAD, spread_options, write_robustness
 
 
 def _factories(env_id: str, controllers: Sequence[str] | Mapping[str, Callable] | None,
@@ -51,14 +53,34 @@ def _evaluate_into(
     seed: int,
     command: str,
     progress: Progress,
+    spread: float | str | None = None,
 ) -> EvaluationResult:
-    """Evaluate and write results.json, results.md and the plots into ``work``."""
+    """Evaluate and write results.json, results.md and the plots into ``work``; with a
+    ``spread`` (Monte Carlo), every episode on a plant of its own, and robustness.md and
+    robustness.json beside (:func:`_robustness_into`)."""
     from ssme_envs.evaluation import evaluate
     from ssme_envs.results import write_evaluation
 
-    result = evaluate(env_id, factories, scenarios, episodes, seed, progress=progress)
+    options = None if spread is None else spread_options(env_id, spread)
+    result = evaluate(env_id, factories, scenarios, episodes, seed, progress=progress, options=options)
     write_evaluation(result, work, command)
+    if spread is not None:
+        _robustness_into(work, result, factories, seed, spread, command, progress)
     return result
+
+
+def _robustness_into(
+    work: Path, drawn: EvaluationResult, factories: Mapping[str, Callable], seed: int, spread: float | str,
+    command: str, progress: Progress,
+) -> None:  # fmt: skip
+    """robustness.md and .json in ``work`` for the drawn-plant evaluation ``drawn``, the nominal
+    plant's mean cost from a second run on the same seeds."""
+    from ssme_envs.evaluation import evaluate
+
+    progress("the same episodes on the nominal plant ...")
+    episodes = next(iter(drawn.rollouts.values())).alive.shape[1]
+    nominal = evaluate(drawn.env_id, factories, list(drawn), episodes, seed, progress=progress)
+    write_robustness(work, drawn, nominal, spread, command)
 
 
 def evaluate_to(
@@ -72,6 +94,8 @@ def evaluate_to(
     allow_pickle: bool = False,
     command: str | None = None,
     progress: Progress = _silent,
+    monte_carlo: int | None = None,
+    plant_spread: float | str = DEFAULT_SPREAD,
 ) -> EvaluationResult:
     """Evaluate controllers on an env's scenarios; write results.json, results.md and plots.
 
@@ -86,6 +110,11 @@ def evaluate_to(
         Per scenario; checked against the free memory first.
     command : str, optional
         The command line quoted in results.md (default: this call's ``ssme-envs evaluate``).
+    monte_carlo : int, optional
+        Robustness: run each controller over this many plants drawn with ``plant_spread`` (a
+        relative spread, or ``"uncertainty"``: the model.json's covariance), one per episode
+        (``episodes`` is then this number), and write robustness.md: mean, worst case and CVaR
+        per controller, the nominal plant's mean beside (:mod:`ssme_envs.robustness`).
 
     Returns
     -------
@@ -95,13 +124,22 @@ def evaluate_to(
 
     check_env_id(env_id)
     names = scenario_names(env_id) if scenarios is None else check_scenarios(env_id, scenarios)
+    spread = None
+    if monte_carlo is not None:
+        spread = spread_options(env_id, plant_spread)["plant_spread"]  # checked before any work
+        episodes = monte_carlo
     factories = _factories(env_id, controllers, allow_pickle)
-    check_episodes(episodes, {env_id: len(names) * len(factories)})
+    check_episodes(episodes, {env_id: len(names) * len(factories) * (1 if spread is None else 2)})
     if command is None:
+        runs = (
+            f"--episodes {episodes}"
+            if spread is None
+            else f"--monte-carlo {episodes} --plant-spread {spread}"
+        )
         command = (f"ssme-envs evaluate --env {env_id} --controllers {','.join(factories)} --scenario "
-                   f"{','.join(names)} --episodes {episodes} --seed {seed} --out {out_dir}")  # fmt: skip
+                   f"{','.join(names)} {runs} --seed {seed} --out {out_dir}")  # fmt: skip
     with output_directory(out_dir) as work:
-        return _evaluate_into(work, env_id, factories, scenarios, episodes, seed, command, progress)
+        return _evaluate_into(work, env_id, factories, scenarios, episodes, seed, command, progress, spread)
 
 
 def report_plan(learned: bool | None = None) -> dict[str, tuple[list[str], list[str]]]:
@@ -120,6 +158,19 @@ def report_plan(learned: bool | None = None) -> dict[str, tuple[list[str], list[
     return plan
 
 
+def robustness_plan(learned: bool | None = None) -> dict[str, tuple[list[str], list[str]]]:
+    """``{env_id: (controller specs, scenarios)}`` of the main report's robustness runs (the
+    policies only when stable-baselines3 is installed)."""
+    from ssme_envs.main_report import ROBUSTNESS_PLAN
+
+    if learned is None:
+        learned = importlib.util.find_spec("stable_baselines3") is not None
+    return {
+        env_id: ([s for s in specs.split(",") if learned or not s.startswith("ppo")], scenarios)
+        for env_id, (specs, scenarios) in ROBUSTNESS_PLAN.items()
+    }
+
+
 def run_report(out_dir: str | Path, episodes: int = 20, progress: Progress = _silent) -> Path:
     """The main job: identify the engine and the nozzle on their embedded experiments, evaluate the
     controllers of each env on its scenarios, and write report.md (sub-reports in engine/,
@@ -130,10 +181,16 @@ def run_report(out_dir: str | Path, episodes: int = 20, progress: Progress = _si
     learned = importlib.util.find_spec("stable_baselines3") is not None
     plan = report_plan(learned)
     check_episodes(episodes, {e: len(s) * len(c) for e, (c, s) in plan.items()})
+    robust = robustness_plan(learned)
+    check_episodes(PLANTS_PER_EPISODE * episodes, {e: 2 * len(s) * len(c) for e, (c, s) in robust.items()})
     start = time.perf_counter()
     with output_directory(out_dir) as work:
         progress("identifying the engine (embedded experiment, five power levels) ...")
         engine_embedded_into(work / "engine", None, {})
+        progress("identifying the nonlinear engine truth (the same experiment) ...")
+        from ssme_envs.identification.engine_nonlinear_pipeline import nonlinear_into
+
+        nonlinear_into(work / "engine")
         progress("identifying the nozzle (bench test) ...")
         nozzle_into(work / "nozzle", None, None, 2, None, None, progress)
         if not learned:
@@ -150,6 +207,18 @@ def run_report(out_dir: str | Path, episodes: int = 20, progress: Progress = _si
             factories = _factories(env_id, specs, False)
             evaluations[env_id] = _evaluate_into(
                 work / folder, env_id, factories, scenarios, episodes, 0, command, progress
+            )
+        plants = PLANTS_PER_EPISODE * episodes
+        for env_id, (specs, scenarios) in robust.items():
+            folder = robustness_folder(env_id)
+            command = (
+                f"ssme-envs evaluate --env {env_id} --controllers {','.join(specs)} --scenario "
+                f"{','.join(scenarios)} --monte-carlo {plants} --out {out_dir / folder}"
+            )
+            progress(f"robustness on {env_id}: {plants} drawn plants ...")
+            factories = _factories(env_id, specs, False)
+            _evaluate_into(
+                work / folder, env_id, factories, scenarios, plants, 0, command, progress, DEFAULT_SPREAD
             )
         write_main_report(work, evaluations, episodes, time.perf_counter() - start, shown=out_dir)
     return out_dir / "report.md"

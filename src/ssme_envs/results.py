@@ -10,7 +10,8 @@ from typing import Any
 import numpy as np
 
 from ssme_envs.evaluation import Rollout, layout_of
-from ssme_envs.evaluation_result import ControllerMetrics, EvaluationResult
+from ssme_envs.evaluation_result import ControllerMetrics, EvaluationResult, OutputMetrics
+from ssme_envs.metrics import AT_LIMIT_TOL
 from ssme_envs.outputs import save_figure, write_text
 
 
@@ -33,14 +34,26 @@ def _fmt(value: float | None, digits: int = 3) -> str:
     return f"{value:.{digits}g}" if abs(value) < 1e4 else f"{value:.3e}"
 
 
+def _limit_cycle_cell(o: OutputMetrics) -> str:
+    """Share of episodes with a limit cycle, its median period and amplitude; "none <= X s" when
+    the windows showed none with a period up to X; "-" when no window was long enough."""
+    share = o.limit_cycle_fraction
+    if not math.isfinite(share):
+        return "-"
+    if share == 0:
+        return f"none ≤ {_fmt(o.limit_cycle_longest_period, 2)} s"
+    return f"{100 * share:.0f} % ({_fmt(o.limit_cycle_period, 2)} s, ±{_fmt(o.limit_cycle_amplitude, 2)})"
+
+
 def scenario_table(env_id: str, scenario: str, rows: dict[str, ControllerMetrics]) -> str:
     """A markdown table of every controller's metrics on one scenario."""
     layout = layout_of(env_id)
     head = ["controller", "return", "cost CVaR90", "ends"]
     for out in layout.outputs:
-        head += [f"{out} IAE", f"{out} ITAE", f"{out} overshoot %", f"{out} settling s", f"{out} ss err"]
+        head += [f"{out} IAE", f"{out} ITAE", f"{out} overshoot %", f"{out} settling s", f"{out} ss err",
+                 f"{out} limit cycle (period, ±amplitude)"]  # fmt: skip
     for act in layout.actuators:
-        head += [f"{act} reversals", f"{act} saturated"]
+        head += [f"{act} reversals", f"{act} % of time at limit"]
     lines = [f"**{scenario}** (errors in {layout.unit}, times in s)", "", "| " + " | ".join(head) + " |"]
     lines.append("|" + "---|" * len(head))
     for name, m in rows.items():
@@ -53,10 +66,10 @@ def scenario_table(env_id: str, scenario: str, rows: dict[str, ControllerMetrics
         for out in layout.outputs:
             o = m.outputs[out]
             cells += [_fmt(o.iae), _fmt(o.itae), _fmt(o.overshoot), _fmt(o.settling_time),
-                      _fmt(o.steady_state_error)]  # fmt: skip
+                      _fmt(o.steady_state_error), _limit_cycle_cell(o)]  # fmt: skip
         for act in layout.actuators:
             a = m.actuators[act]
-            cells += [_fmt(a.reversals), _fmt(a.saturated_steps)]
+            cells += [_fmt(a.reversals), _fmt(100 * a.time_at_limit, 2)]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
@@ -104,9 +117,16 @@ def write_evaluation(results: EvaluationResult, out: Path, command: str) -> Path
     lines += [
         "Return: mean ± std over the episodes (higher is better); cost CVaR90: mean cost of the worst 10 %; "
         "ends: episodes terminated early. IAE, ITAE over the episode; overshoot and settling time (2 %) on "
-        "single-step references; ss err: mean |error| over the last 10 % of the episode; reversals: "
-        "changes of direction of each actuator per episode (wear); saturated: steps whose requested action "
-        "was beyond [-1, 1].",
+        "single-step references; ss err: mean |error| over the last 10 % of the episode; limit cycle: "
+        "share of the episodes (of those long enough to test) whose error oscillates persistently while "
+        "the references hold still "
+        "(autocorrelation of each stretch of constant reference after its first quarter: at least three "
+        "regular cycles carrying more power than the sensor noise, not decaying), with the median period "
+        "and sine-equivalent amplitude (error unit); 'none ≤ X s': none found with a period up to X, the "
+        "longest the stretches could show; '-': no stretch long enough. Reversals: changes of direction "
+        "of each actuator per episode (wear); % of time at limit: share of the episode's steps at which "
+        "the action the env applied (after its clip to [-1, 1]) sat at full scale (within "
+        f"{AT_LIMIT_TOL:g} of it), whatever the controller requested.",
         "",
     ]
     for scenario in results:

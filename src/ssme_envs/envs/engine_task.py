@@ -9,6 +9,7 @@ from typing import Any, ClassVar, NamedTuple
 
 import numpy as np
 
+from ssme_envs.envs.engine_nonlinear_plant import NonlinearPlantCore, nonlinear_engine_of, nonlinear_task
 from ssme_envs.envs.references import (
     Fault,
     check_reference,
@@ -29,6 +30,7 @@ from ssme_envs.models.engine import (
     step_arrays,
     valves_pair_floats,
 )
+from ssme_envs.models.engine_nonlinear import NonlinearEngine
 from ssme_envs.models.linked import LinkedEngineModel
 from ssme_envs.models.statespace import AlphaCanonicalModel
 
@@ -78,7 +80,8 @@ def resolve_plant(plant: str | Path | AlphaCanonicalModel, power: float) -> Alph
 
     ``"truth"``: the linked published model at ``power`` (Table I itself at 70-100 %);
     ``"identified"``: the packaged design model identified at ``power`` (70, 80, 90, 100, 110 %);
-    a path to an engine model.json; or a model object.
+    a path to an engine model.json; or a model object. (``"nonlinear"``, the nonlinear engine,
+    is no linear model: :meth:`EngineTask.build` takes it.)
     """
     if isinstance(plant, AlphaCanonicalModel):
         return plant
@@ -90,7 +93,9 @@ def resolve_plant(plant: str | Path | AlphaCanonicalModel, power: float) -> Alph
         return identified_model(int(power))
     if isinstance(plant, str | Path) and str(plant).endswith(".json"):
         return AlphaCanonicalModel.load(plant)
-    raise ValueError(f"plant must be 'truth', 'identified', a model.json path or a model, got {plant!r}")
+    raise ValueError(
+        f"plant must be 'truth', 'identified', 'nonlinear', a model.json path or a model, got {plant!r}"
+    )
 
 
 def design_model(power: float, source: str = "identified") -> AlphaCanonicalModel:
@@ -123,6 +128,8 @@ class EngineTask:
     envelope: float = 0.1  # tracking error (noise-free, normalized) that ends an episode (10 %)
     integral_limit: float = 100.0  # % s, anti-windup bound of the error integrals
     offset_table: np.ndarray | None = field(default=None, repr=False)  # (T + 1, m) added to commands
+    # the nonlinear engine as the plant (plant="nonlinear"), or None: the point model
+    nonlinear: NonlinearPlantCore | None = field(default=None, repr=False)
     # the float core's operands in one tuple (one attribute read a step): pair_rows of K and B,
     # lambda - 1 of each valve, half the backlash, the stiction band
     rows: tuple = field(init=False, repr=False)
@@ -147,7 +154,7 @@ class EngineTask:
     def build(
         cls,
         power: float = 100.0,
-        plant: str | Path | AlphaCanonicalModel = "truth",
+        plant: str | Path | AlphaCanonicalModel | NonlinearEngine = "truth",
         truth: TruthConfig | Mapping[str, Any] | None = None,
         reference: str = "random_steps",
         reference_amplitude: float | tuple[float, float] = 0.01,
@@ -156,6 +163,12 @@ class EngineTask:
         action_scale: float = 0.02,
     ) -> EngineTask:
         power = LinkedEngineModel.check_power(power)
+        engine = nonlinear_engine_of(plant)
+        if engine is not None:  # the point model's task with the nonlinear engine as its plant
+            linear = cls.build(power=power, truth=truth, reference=reference, fault=fault,
+                               reference_amplitude=reference_amplitude, episode_seconds=episode_seconds,
+                               action_scale=action_scale)  # fmt: skip
+            return nonlinear_task(linear, engine, resolve_truth(truth).asymmetric_gains)
         model = resolve_plant(plant, power)
         if model.n_inputs != 2 or model.n_outputs != 2:
             raise ValueError(
@@ -207,6 +220,11 @@ class EngineTask:
         )
 
     def __post_init__(self) -> None:
+        if self.nonlinear is not None:
+            # the nonlinear engine's plant step and start, as instance attributes: the point
+            # model's step path keeps its method lookups as they are
+            object.__setattr__(self, "advance", self.nonlinear.advance)
+            object.__setattr__(self, "initial_plant", self.nonlinear.initial_plant)
         k_rows, b_rows, lam = self.params.floats()
         object.__setattr__(
             self,
@@ -238,7 +256,10 @@ class EngineTask:
         )
 
     def design_model(self, source: str = "identified") -> AlphaCanonicalModel:
-        """The linear model a controller is designed on: :func:`design_model` at the env's power."""
+        """The linear model a controller is designed on: :func:`design_model` at the env's power;
+        on the nonlinear plant, ``"truth"`` is its linearization about the trim at that power."""
+        if source == "truth" and self.nonlinear is not None:
+            return self.nonlinear.engine.linear_model(self.operating_power)
         return design_model(self.operating_power, source)
 
     @classmethod

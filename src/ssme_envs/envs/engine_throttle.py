@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from ssme_envs.envs.engine_nonlinear_plant import nonlinear_engine_of, nonlinear_task
 from ssme_envs.envs.engine_task import EnginePlant, EngineTask, resolve_truth
 from ssme_envs.envs.engine_tracking import EngineTrackingEnv
 from ssme_envs.envs.references import Fault
@@ -22,6 +23,7 @@ from ssme_envs.models.engine import (
     valves_arrays,
     valves_pair_floats,
 )
+from ssme_envs.models.engine_nonlinear import NonlinearEngine
 from ssme_envs.models.linked import POWER_RANGE, LinkedEngineModel
 
 # The mission profile of the paper's figure 2, compressed in time (the flight spends about
@@ -48,7 +50,10 @@ def power_profile(profile: Sequence[tuple[float, float]], dt: float) -> np.ndarr
 
 @dataclass(frozen=True)
 class ThrottleTask(EngineTask):
-    """An engine task whose plant is the linked model scheduled on the commanded power P(t):
+    """An engine task whose plant is the linked model scheduled on the commanded power P(t)
+    (``plant="truth"``; with ``plant="nonlinear"`` the nonlinear engine, ``nonlinear``, steps
+    instead, and its own trim gives ``offset_table`` and ``x_start``; the linked tables stay
+    unused):
 
     ``x(k+1) = A(P) x + B(P) u* + (I - A(P)) C^T c(P)``, ``y = C x``, with
     ``c(P) = y_eq(P) - G(P) u_eq(P)`` and ``u* = u + (lambda(P) - 1) |u - u_eq(P)|``. At a fixed
@@ -93,7 +98,11 @@ class ThrottleTask(EngineTask):
         truth: TruthConfig | Mapping[str, Any] | None = None,
         fault: Mapping[str, Any] | Fault | None = None,
         action_scale: float = 0.02,
+        plant: str | NonlinearEngine = "truth",
     ) -> ThrottleTask:
+        engine = nonlinear_engine_of(plant)
+        if engine is None and not (isinstance(plant, str) and plant == "truth"):
+            raise ValueError(f"plant must be 'truth', 'nonlinear' or a NonlinearEngine, got {plant!r}")
         power = power_profile(profile, ENGINE_DT)
         if power.size < 2:
             raise ValueError("the profile is shorter than one 0.04 s step")
@@ -117,7 +126,7 @@ class ThrottleTask(EngineTask):
         x_start = np.linalg.solve(eye - a[0], b[0] @ u_nom[0] + offset[0])
         values = {f.name: getattr(base, f.name) for f in dataclasses.fields(base) if f.init}
         values.update(horizon=power.size - 1, reference="throttle", offset_table=u_nom)
-        return cls(
+        task = cls(
             **values,
             power=power,
             nominal_outputs=y_nom,
@@ -127,6 +136,8 @@ class ThrottleTask(EngineTask):
             state_offsets=offset,
             x_start=x_start,
         )
+        # on the nonlinear engine: its own trim gives the nominal valve schedule and the start
+        return task if engine is None else nonlinear_task(task, engine, config.asymmetric_gains)
 
     @property
     def nominal_valves(self) -> np.ndarray:
@@ -216,6 +227,13 @@ class EngineThrottleEnv(EngineTrackingEnv):
 
     ## Arguments
     profile : list of (time s, power %) breakpoints within 65-109 % (default: the mission).
+    plant : "truth" (default: the linked model scheduled on the commanded power, above) or
+    "nonlinear" (or a ``NonlinearEngine``): the synthetic nonlinear engine of
+    :mod:`ssme_envs.models.engine_nonlinear`, scheduled on the power implied by its own chamber
+    pressure, never on the command; its own trim valve positions at the commanded power are the
+    nominal schedule u_eq(P(t)), so zero action still holds the profile at steady state; it
+    starts at its trim at the profile's first power. Controllers may still schedule on the
+    commanded power (the reference).
     truth, fault, action_scale, render_mode : as in ``EngineTracking-v0``.
     """
 

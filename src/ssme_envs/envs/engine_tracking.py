@@ -59,8 +59,15 @@ class EngineTrackingEnv(TrackingEnv):
     None or ``{}``, else TypeError (not a dict) or ValueError (naming the unknown keys).
 
     ## Arguments
-    power : 65-109 %, default 100. plant : "truth" (default), "identified" (at 70, 80, 90, 100 %), a
-    model.json path or a model. truth : TruthConfig or dict (asymmetric_gains, backlash,
+    power : 65-109 %, default 100. plant : "truth" (default: the linked published model at
+    ``power``), "identified" (at 70, 80, 90, 100 %), a model.json path or a model, or
+    "nonlinear": the synthetic nonlinear engine of :mod:`ssme_envs.models.engine_nonlinear`
+    (consistent with Table I's local models, not Rocketdyne's simulation; a ``NonlinearEngine``
+    object also serves, e.g. with a schedule lag), started at its trim at ``power``, its
+    parameters scheduled on the power implied by its own chamber pressure; the valve effects and
+    sensor noise of ``truth`` act as on the linear plant, ``asymmetric_gains=False`` makes its
+    valve flow curve linear, and a controller's ``"truth"`` design model is its linearization at
+    ``power``. truth : TruthConfig or dict (asymmetric_gains, backlash,
     stiction, sensor_noise), the effects added to the plant. reference : "random_steps"
     (default), "step", "ramp", "prbs", "sine_sweep", "attitude", "zero", "mixed" (each episode
     one of random_steps, step, ramp, sine_sweep, attitude); reference_amplitude (normalized,

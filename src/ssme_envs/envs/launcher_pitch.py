@@ -314,6 +314,8 @@ class LauncherPitchEnv(TrackingEnv):
     "magnitude": 0.5}`` (servo torque) or ``{"kind": "sensor_bias", "time": 5.0, "magnitude":
     0.005}`` (attitude, rad). episode_seconds; instability, effectiveness (mu_a, mu_c in
     1/s^2). render_mode : "human" or "rgb_array".
+    plant_spread, uncertainty_scale : the nozzle joint drawn per episode, as NozzleTVC's (the
+    servo's gains stay those of the nominal joint; the rigid body is not drawn).
     """
 
     output_names = ("pitch attitude",)

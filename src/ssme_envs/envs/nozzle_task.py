@@ -109,6 +109,14 @@ def resolve_nozzle(plant: str | Path | NozzleParameters | NozzleModel) -> tuple[
     )
 
 
+def rule_substeps(joints: Sequence[NozzleParameters], envelope: float) -> int:
+    """RK4 substeps per env step for the worst of ``joints`` (the env's rule, see NozzleTVCEnv)."""
+    return max(
+        integration_substeps(joint, NOZZLE_DT, envelope, DEFAULT_TORQUE_LIMIT, ENV_STEP_RATE, sample="step")
+        for joint in joints
+    )
+
+
 def episode_options(
     reference: str,
     amplitude_deg: float,
@@ -191,10 +199,7 @@ class NozzleTask:
             rate_limit = check_number("rate_limit", rate_limit, 0.0, math.inf, low_open=True)
         envelope = math.radians(6.0)
         if substeps is None:  # the worst joint the spread can draw (its corners) sets the count
-            substeps = max(
-                integration_substeps(joint, NOZZLE_DT, envelope, DEFAULT_TORQUE_LIMIT, ENV_STEP_RATE, sample="step")
-                for joint in joints
-            )
+            substeps = rule_substeps(joints, envelope)
         elif not isinstance(substeps, int) or isinstance(substeps, bool) or not 1 <= substeps <= MAX_SUBSTEPS:
             raise ValueError(f"substeps must be an integer in 1-{MAX_SUBSTEPS}, got {substeps!r}")
         else:  # the caller's count: accuracy is theirs, stability is checked
@@ -242,7 +247,9 @@ class NozzleTask:
         """Uniform float32 numbers one episode consumes: sensor noise (an even count for the
         Box-Muller pairs), then the reference's, then the joint's (:attr:`plant_draw_size`)."""
         length = self.horizon + 1
-        return length + length % 2 + uniforms_needed(self.reference, length, 1, self.dt) + self.plant_draw_size
+        return (
+            length + length % 2 + uniforms_needed(self.reference, length, 1, self.dt) + self.plant_draw_size
+        )
 
     def episodes(self, uniforms: np.ndarray, start: int, stop: int) -> tuple[np.ndarray, np.ndarray]:
         """The steps [start, stop) of k episodes from their uniforms (draw_size, k) float32, as
@@ -350,5 +357,6 @@ __all__ = [
     "NozzleTask",
     "episode_options",
     "resolve_nozzle",
+    "rule_substeps",
     "strong_linear_nozzle",
 ]

@@ -84,6 +84,17 @@ class NozzleTVCEnv(TrackingEnv):
     fault : ``{"kind": "gain_loss", "time": 2.0, "magnitude": 0.5}`` or ``{"kind": "sensor_bias",
     "time": 2.0, "magnitude": 0.005}`` (rad). episode_seconds, actuator_lag, rate_limit, substeps
     (1-10,000; default the rule's count). render_mode : "human" or "rgb_array".
+    plant_spread : None (default: one plant), a number in (0, 0.5], or "uncertainty": each
+    episode runs on a joint of its own. A number s multiplies J, b, k_el, k_hys, beta_n and gamma_n
+    (the normalized Bouc-Wen parameters) by independent factors exp(s z), z standard normal
+    truncated at +-3 (the exponent n is kept); "uncertainty" draws them from the covariance of the
+    model.json the plant comes from (plant="identified", "strong_identified", a path or a model),
+    standard deviations times uncertainty_scale (default 1), truncated at +-3 sigma. The draw uses
+    the episode's generator after its noise and references (those stay what they are without a
+    spread), so the native vector env equals SyncVectorEnv and a seed fixes the plant; the
+    substep count is sized for the worst joint the spread can reach. The controllers still
+    design on the nominal model. See :mod:`ssme_envs.envs.plant_spread` and ``ssme-envs evaluate
+    --monte-carlo``.
     """
 
     output_names = ("nozzle angle",)

@@ -70,7 +70,10 @@ class PlantSpread:
             root[NAMES.index(name), j] = spread
         norm = joint.normalized()
         return cls(
-            np.array([norm[k] for k in NAMES]), root, True, f"relative spread {spread:g} (log-normal, +-3 sigma)"
+            np.array([norm[k] for k in NAMES]),
+            root,
+            True,
+            f"relative spread {spread:g} (log-normal, +-3 sigma)",
         )
 
     @classmethod
@@ -88,8 +91,16 @@ class PlantSpread:
                 "plant_spread='uncertainty' needs a model.json with an uncertainty block for its plant "
                 "(identify it with this version, or give a relative spread such as plant_spread=0.1)"
             )
-        values, vectors = np.linalg.eigh(block.covariance)
-        factor = vectors * np.sqrt(np.clip(values, PSD_TOL * max(values.max(initial=0.0), 0.0), None))
+        # a square root of the correlation (scale-free: the parameters' units differ by 10 orders
+        # of magnitude, so round-off eigenvalues are judged on it), scaled back by the deviations
+        sd = block.standard_errors
+        unit = np.where(sd > 0, sd, 1.0)
+        values, vectors = np.linalg.eigh(block.covariance / np.outer(unit, unit))
+        factor = (
+            sd[:, None]
+            * vectors
+            * np.sqrt(np.clip(values, PSD_TOL * max(values.max(initial=0.0), 0.0), None))
+        )
         root = np.zeros((len(NAMES), len(names)))
         for i, name in enumerate(names):
             root[NAMES.index(name)] = scale * factor[i]
@@ -177,8 +188,10 @@ def resolve_spread(
         if not (isinstance(uncertainty_scale, int | float) and 0 < uncertainty_scale <= 100):
             raise ValueError(f"uncertainty_scale must be a number in (0, 100], got {uncertainty_scale!r}")
         return PlantSpread.from_model(joint, _model_of(plant), float(uncertainty_scale))
-    if isinstance(plant_spread, bool) or not isinstance(plant_spread, int | float) or not math.isfinite(
-        plant_spread
+    if (
+        isinstance(plant_spread, bool)
+        or not isinstance(plant_spread, int | float)
+        or not math.isfinite(plant_spread)
     ):
         raise ValueError(f"plant_spread must be a number or 'uncertainty', got {plant_spread!r}")
     return PlantSpread.relative_spread(joint, float(plant_spread))

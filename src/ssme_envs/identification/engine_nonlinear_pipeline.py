@@ -10,6 +10,7 @@ at an operating point; :func:`run_nonlinear` identifies each Table I level from 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from pathlib import Path
 
 import numpy as np
 
@@ -101,3 +102,15 @@ def run_nonlinear(
         model.fit.update(validation)
         results.append(LevelResult(power, published_model(power), ident, records, validation))
     return results
+
+
+def nonlinear_into(work: Path, seed: int = DEFAULT_SEED, test_scale: float = 1.0) -> Path:
+    """Identify the five levels on the nonlinear truth (:func:`run_nonlinear`) and add their
+    section (Table I beside the identified models, Table II's SEE beside ours) to
+    ``work``/report.md, the embedded experiment's report. Returns the report's path."""
+    from ssme_envs.identification import report
+
+    results = run_nonlinear(seed, test_scale=test_scale)
+    amplitude = np.abs(results[0].records["validation_low_frequency"].u).max(axis=0)
+    section = report.nonlinear_section(results, seed, test_scale, amplitude.tolist())
+    return report.append_section(Path(work) / "report.md", section)

@@ -89,7 +89,7 @@ OPERATING_RANGE = (65.0, 110.0)  # %, accepted operating points
 FLOW_AMPLITUDE = 0.01  # normalized valve travel at which phi's chords are lambda and 2 - lambda
 DEFAULT_SCHEDULE_LAG = 0.0  # s, time constant of the scheduling variable (0: none)
 PC_PER_PERCENT = 0.01  # normalized Pc per % of power
-_GRID_STEP = 0.25  # %, node spacing of the parameter and trim tables
+GRID_STEP = 0.25  # %, node spacing of the parameter and trim tables
 _GAUSS = np.polynomial.legendre.leggauss(6)
 _S1 = np.sqrt(2.0) - 1.0  # s(1)
 
@@ -204,9 +204,9 @@ class NonlinearEngine:
 
     def _build_table(self) -> None:
         lo, hi = SCHEDULE_RANGE
-        grid = lo + _GRID_STEP * np.arange(round((hi - lo) / _GRID_STEP) + 1)
+        grid = lo + GRID_STEP * np.arange(round((hi - lo) / GRID_STEP) + 1)
         if not np.all(np.isin(self.powers, grid)):
-            raise ValueError(f"power levels must lie on the {_GRID_STEP} % grid within {SCHEDULE_RANGE}")
+            raise ValueError(f"power levels must lie on the {GRID_STEP} % grid within {SCHEDULE_RANGE}")
         params, dparams = self._local(grid)
         trim_slopes = self._trim_slopes(grid)
         nodes, weights = _GAUSS
@@ -217,8 +217,12 @@ class NonlinearEngine:
         trim = np.vstack([np.zeros(steps.shape[1]), np.cumsum(steps, axis=0)])
         trim -= trim[np.flatnonzero(grid == 100.0)[0]]  # x_eq(100) = 0, v_eq(100) = 0
         spline = CubicHermiteSpline(grid, np.hstack([params, trim]), np.hstack([dparams, trim_slopes]))
-        self._lo, self._step, self._grid = lo, _GRID_STEP, grid
-        self._coef = np.ascontiguousarray(spline.c)  # (4, segments, columns)
+        # the piecewise cubic of the table, read by table() and by the engine envs' step: on
+        # segment s (grid[s] <= rho < grid[s + 1]), column j is ((c0 t + c1) t + c2) t + c3 with
+        # t = rho - grid[s] and c = coef[:, s, j]
+        self.grid = grid  # (segments + 1,) %, the nodes, SCHEDULE_RANGE[0] + GRID_STEP k
+        self.coef = np.ascontiguousarray(spline.c)  # (4, segments, columns)
+        self.columns = self._cols  # column slices of the table: K, B, lam, x_eq, v_eq
         fine = self.table(np.linspace(lo, hi, 4 * grid.size))
         if np.max(np.abs(fine["lam"] - 1.0)) >= _S1:
             raise ValueError(f"|lambda - 1| reaches sqrt(2) - 1 within {SCHEDULE_RANGE} %: phi not monotone")
@@ -232,9 +236,9 @@ class NonlinearEngine:
         ``rho`` (%, shape (N,)) is clipped to ``SCHEDULE_RANGE`` first.
         """
         r = np.clip(np.asarray(rho, dtype=float), *SCHEDULE_RANGE)
-        seg = np.minimum(((r - self._lo) / self._step).astype(np.intp), self._coef.shape[1] - 1)
-        t = (r - self._grid[seg])[:, None]
-        c = self._coef
+        seg = np.minimum(((r - SCHEDULE_RANGE[0]) / GRID_STEP).astype(np.intp), self.coef.shape[1] - 1)
+        t = (r - self.grid[seg])[:, None]
+        c = self.coef
         vals = ((c[0, seg] * t + c[1, seg]) * t + c[2, seg]) * t + c[3, seg]
         n, p, m = self.layout.n, self.layout.p, self.layout.m
         cols = self._cols
@@ -270,6 +274,24 @@ class NonlinearEngine:
         P = self.check_power(power)
         tab = self.table(P)
         return tab["x_eq"].copy(), P.copy(), tab["v_eq"].copy()
+
+    def linear_model(self, power: float) -> AlphaCanonicalModel:
+        """The engine's linearization about its trim at ``power`` % (65-110): ``A = A_o + K(P) C``,
+        ``B(P)`` and ``lambda(P)`` of the table (the Jacobian of the one-step map, module docstring;
+        Table I's model at the Table I levels)."""
+        tab = self.table(self.check_power(power))
+        t = self.template
+        return AlphaCanonicalModel(
+            A=self.shift + tab["K"][0] @ self.C,
+            B=tab["B"][0],
+            C=self.C,
+            dt=self.dt,
+            observability_indices=t.observability_indices,
+            lam=tab["lam"][0],
+            input_names=t.input_names,
+            output_names=t.output_names,
+            fit={"source": f"nonlinear engine linearized at {float(power):g} % power"},
+        )
 
     def power_of(self, x: np.ndarray) -> np.ndarray:
         """Power implied by the chamber pressure of states x (N, n), %."""

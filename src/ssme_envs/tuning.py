@@ -1,0 +1,414 @@
+"""Hyperparameter search with Optuna on a study that several processes or machines share.
+
+Every worker (``ssme-envs tune``, or :func:`tune`) opens the same study in a shared storage and
+runs its own trials; Optuna's storage hands out the trial numbers and the samplers read each
+other's results from it, so starting more workers on one study makes the search go faster:
+
+* ``journal:PATH``: Optuna's journal file (``JournalStorage`` on ``JournalFileBackend``), which
+  any process that sees PATH can use, also on NFS (its lock needs no ``fcntl``);
+* an RDB URL (``sqlite:///study.db``, ``postgresql://user:pw@host/db``, ``mysql+pymysql://...``)
+  for machines that reach one database server.
+
+A trial trains PPO, SAC or TD3 with sampled hyperparameters for ``timesteps`` steps on the
+env's native vector env through the SB3 adapter (VecNormalize, as ``ssme-envs train`` does), and
+scores the policy ``evaluations`` times during training by the evaluation harness's cost (minus
+the return, mean over ``eval_episodes`` episodes of the env as registered, seeded from
+:data:`EVAL_SEED`, not the harness's seed 0); each score is reported to Optuna so that a
+``MedianPruner`` stops unpromising trials, and the last one is the trial's value (minimized).
+The search spaces are :data:`SPACES`. The best trial's settings are written as a TOML config of
+``ssme-envs train`` (and experiments/train_policies.py).
+
+Seeds: the worker's ``TPESampler`` and the training of its trials take ``seed``. With several
+workers a trial's sample depends on which trials the others had finished when it started, so a
+shared study is not reproducible bit for bit; a single worker on a fresh study is.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import socket
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+EVAL_SEED = 1_000_000  # first evaluation episode: apart from the harness's seeds (0, ...) that reports use
+
+
+@dataclass(frozen=True)
+class Budget:
+    """What every trial of a study gets: steps, parallel envs and evaluations (the search spaces
+    depend on them, so every worker of a study must use the same)."""
+
+    timesteps: int
+    num_envs: int
+    evaluations: int
+
+
+def _choices(values: list[int], fits: Callable[[int], bool]) -> list[int]:
+    """The values that fit the budget, at least the smallest (a study's choices never change)."""
+    return [v for v in values if fits(v)] or values[:1]
+
+
+_GAMMAS = [0.95, 0.98, 0.99, 0.995, 0.999]
+PPO_N_STEPS = [8, 16, 32, 64, 128, 256, 512]
+
+
+def buffer_size(timesteps: int) -> int:
+    """The off-policy replay buffer: every step of a trial, at most SB3's default."""
+    return min(1_000_000, timesteps)
+
+
+def _net(trial: Any, sizes: list[str]) -> list[int]:
+    return [int(width) for width in trial.suggest_categorical("net_arch", sizes).split("x")]
+
+
+def sample_ppo(trial: Any, budget: Budget) -> tuple[dict[str, Any], list[int]]:
+    """PPO's hyperparameters and net_arch: rollouts that fit ``evaluations`` times in the budget,
+    minibatches dividing them."""
+    per_round = budget.timesteps // budget.evaluations
+    steps = _choices(PPO_N_STEPS, lambda n: n * budget.num_envs <= per_round)
+    n_steps = trial.suggest_categorical("n_steps", steps)
+    minibatches = trial.suggest_categorical("minibatches", [1, 2, 4, 8])
+    hyper = {
+        "n_steps": n_steps,
+        "batch_size": max(2, n_steps * budget.num_envs // minibatches),
+        "n_epochs": trial.suggest_categorical("n_epochs", [3, 5, 10, 20]),
+        "learning_rate": trial.suggest_float("learning_rate", 1e-5, 3e-3, log=True),
+        "gamma": trial.suggest_categorical("gamma", _GAMMAS),
+        "gae_lambda": trial.suggest_categorical("gae_lambda", [0.8, 0.9, 0.95, 0.98, 1.0]),
+        "ent_coef": trial.suggest_float("ent_coef", 1e-8, 1e-2, log=True),
+        "clip_range": trial.suggest_categorical("clip_range", [0.1, 0.2, 0.3]),
+    }
+    return hyper, _net(trial, ["32x32", "64x64", "128x128", "256x256"])
+
+
+def _off_policy(trial: Any, budget: Budget) -> dict[str, Any]:
+    return {
+        "learning_rate": trial.suggest_float("learning_rate", 1e-5, 3e-3, log=True),
+        "batch_size": trial.suggest_categorical("batch_size", [64, 128, 256, 512]),
+        "gamma": trial.suggest_categorical("gamma", _GAMMAS),
+        "tau": trial.suggest_categorical("tau", [0.001, 0.005, 0.01, 0.02, 0.05]),
+        "train_freq": trial.suggest_categorical("train_freq", [1, 2, 4, 8]),
+        "gradient_steps": trial.suggest_categorical("gradient_steps", [1, 2, 4, 8, 16]),
+        "learning_starts": trial.suggest_categorical(
+            "learning_starts", _choices([0, 1_000, 10_000], lambda n: n <= budget.timesteps // 4)
+        ),
+        "buffer_size": buffer_size(budget.timesteps),  # not searched
+    }
+
+
+def sample_sac(trial: Any, budget: Budget) -> tuple[dict[str, Any], list[int]]:
+    """SAC's hyperparameters and net_arch (entropy coefficient learnt, SB3's default)."""
+    return _off_policy(trial, budget), _net(trial, ["64x64", "256x256", "400x300"])
+
+
+def sample_td3(trial: Any, budget: Budget) -> tuple[dict[str, Any], list[int]]:
+    """TD3's hyperparameters and net_arch (no action noise: the configs cannot hold one)."""
+    hyper = _off_policy(trial, budget)
+    hyper["target_policy_noise"] = trial.suggest_categorical("target_policy_noise", [0.1, 0.2, 0.3])
+    return hyper, _net(trial, ["64x64", "256x256", "400x300"])
+
+
+SPACES: dict[str, Callable[[Any, Budget], tuple[dict[str, Any], list[int]]]] = {
+    "ppo": sample_ppo,
+    "sac": sample_sac,
+    "td3": sample_td3,
+}
+"""The search space of each algorithm: ``(trial, budget) -> (hyperparameters, net_arch)``."""
+
+
+def open_storage(url: str) -> Any:
+    """The Optuna storage of ``journal:PATH`` (a journal file) or of an RDB URL; ValueError
+    naming the problem (unknown form, missing directory, database unreachable or its driver
+    not installed)."""
+    import optuna
+
+    if not isinstance(url, str) or not url:
+        raise ValueError("--storage must be journal:PATH or a database URL such as sqlite:///study.db")
+    if url.startswith("journal:"):
+        path = Path(url.removeprefix("journal:"))
+        if not path.name or path.is_dir():
+            raise ValueError(f"--storage {url}: journal:PATH needs a file path")
+        if not path.parent.is_dir():
+            raise ValueError(f"--storage {url}: directory {path.parent} does not exist")
+        from optuna.storages.journal import JournalFileBackend
+
+        return optuna.storages.JournalStorage(JournalFileBackend(str(path)))
+    import sqlalchemy
+
+    try:
+        sqlalchemy.engine.make_url(url)
+    except sqlalchemy.exc.ArgumentError:
+        raise ValueError(
+            f"--storage {url!r}: not journal:PATH nor a database URL (sqlite:///study.db, "
+            "postgresql://user:password@host/db, mysql+pymysql://...)"
+        ) from None
+    try:
+        return optuna.storages.RDBStorage(url)
+    except ImportError as exc:  # the database's driver (psycopg2, pymysql, ...)
+        raise ValueError(f"--storage {url}: the database driver is not installed ({exc})") from None
+    except (sqlalchemy.exc.SQLAlchemyError, ValueError) as exc:
+        raise ValueError(f"--storage {url}: cannot open the database ({str(exc).splitlines()[0]})") from None
+
+
+def _study(storage: Any, name: str, attrs: dict[str, Any], seed: int) -> Any:
+    """The study ``name`` (created if new), checked to be a search of the same env, algorithm and
+    budget as ``attrs``."""
+    import optuna
+
+    sampler = optuna.samplers.TPESampler(seed=seed, constant_liar=True)  # liar: workers spread out
+    pruner = optuna.pruners.MedianPruner(n_startup_trials=5, n_warmup_steps=max(1, attrs["evaluations"] // 3))
+    study = optuna.create_study(
+        storage=storage, study_name=name, direction="minimize", sampler=sampler, pruner=pruner,
+        load_if_exists=True,
+    )  # fmt: skip
+    if study.direction != optuna.study.StudyDirection.MINIMIZE:
+        raise ValueError(f"study {name!r} maximizes; a tuning study minimizes the cost")
+    for _ in range(2):  # set by the first worker; a second look catches two creators racing
+        held = study.user_attrs
+        differ = {
+            key: (held[key], value) for key, value in attrs.items() if key in held and held[key] != value
+        }
+        if differ:
+            text = ", ".join(f"{key} {old!r} (asked {new!r})" for key, (old, new) in differ.items())
+            raise ValueError(f"study {name!r} is a search with {text}: use another --study")
+        for key, value in attrs.items():
+            if key not in held:
+                study.set_user_attr(key, value)
+    return study
+
+
+def _default_scenario(env_id: str) -> str:
+    """The harness's scenario of the env as registered (no options): what a trial trains on."""
+    from ssme_envs.evaluation import SCENARIOS
+
+    return next(
+        (name for name, options in SCENARIOS[env_id].items() if not options), next(iter(SCENARIOS[env_id]))
+    )
+
+
+def policy_cost(model: Any, venv: Any, env_id: str, algo: str, episodes: int) -> float:
+    """The harness's mean episode cost of a model's deterministic policy, observations normalized
+    with ``venv``'s current statistics, on the env as registered (episodes seeded from
+    :data:`EVAL_SEED`)."""
+    from agents.policy_files import LoadedPolicy, Normalization
+    from agents.sb3 import PolicyController
+    from ssme_envs.evaluation import evaluate
+
+    rms = venv.obs_rms
+    stats = Normalization(
+        rms.mean.copy(), rms.var.copy(), float(rms.count), float(venv.clip_obs), float(venv.epsilon)
+    )
+    controller = PolicyController(LoadedPolicy(model.policy, algo, env_id, stats, Path(env_id)))
+    scenario = _default_scenario(env_id)
+    result = evaluate(env_id, {"trial": lambda env: controller}, [scenario], episodes, EVAL_SEED)
+    return float(result[scenario]["trial"].cost_mean)
+
+
+class _Diverged(Exception):
+    """Training produced non-finite numbers: the trial fails, the study goes on."""
+
+
+def make_objective(
+    env_id: str, algo: str, budget: Budget, eval_episodes: int, seed: int
+) -> Callable[[Any], float]:
+    """The Optuna objective: train with the trial's sample, report each evaluation's cost, return
+    the last (minimized); raises ``optuna.TrialPruned`` when the pruner stops the trial."""
+    import optuna
+    from stable_baselines3.common.callbacks import BaseCallback
+    from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
+
+    from agents.policy_files import algorithm_class
+    from agents.sb3 import check_config, plan_steps
+    from ssme_envs.envs.sb3_adapter import make_sb3_vec_env
+
+    def objective(trial: optuna.Trial) -> float:
+        hyper, net_arch = SPACES[algo](trial, budget)
+        config = check_config({"env": env_id, "algo": algo, "steps": budget.timesteps, "seed": seed,
+                               "num_envs": budget.num_envs, "hyperparameters": hyper,
+                               "policy": {"net_arch": net_arch}})  # fmt: skip
+        steps, hyper, _ = plan_steps(config)
+        config["hyperparameters"] = hyper
+        trial.set_user_attr("pid", os.getpid())
+        trial.set_user_attr("host", socket.gethostname())
+        trial.set_user_attr("config", config)  # the settings as `ssme-envs train` reads them
+        venv = VecNormalize(VecMonitor(make_sb3_vec_env(env_id, budget.num_envs, seed)), gamma=hyper["gamma"])
+        try:
+            return _run(trial, venv, steps, hyper, net_arch)
+        finally:
+            venv.close()
+
+    def _run(trial: optuna.Trial, venv: Any, steps: int, hyper: dict[str, Any], net_arch: list[int]) -> float:
+        model = algorithm_class(algo)("MlpPolicy", venv, seed=seed, device="cpu", verbose=0,
+                                      policy_kwargs={"net_arch": net_arch}, **hyper)  # fmt: skip
+        costs: list[float] = []
+        pruned = []
+
+        def score() -> bool:
+            """Evaluate and report; False when the pruner stops the trial."""
+            cost = policy_cost(model, venv, env_id, algo, eval_episodes)
+            if not math.isfinite(cost):
+                raise _Diverged(f"trial {trial.number}: cost {cost} at {model.num_timesteps} steps")
+            costs.append(cost)
+            trial.report(cost, step=len(costs))
+            if len(costs) < budget.evaluations and trial.should_prune():
+                pruned.append(len(costs))
+            return not pruned
+
+        class Evaluations(BaseCallback):
+            def _on_step(self) -> bool:  # the last evaluation comes after training
+                due = len(costs) + 1
+                if due < budget.evaluations and self.model.num_timesteps >= due * steps / budget.evaluations:
+                    return score()
+                return True
+
+        start = time.perf_counter()
+        try:
+            model.learn(steps, callback=Evaluations())
+        except ValueError as exc:  # SB3's distributions refuse NaN parameters
+            raise _Diverged(f"trial {trial.number}: {exc}") from None
+        if pruned:
+            raise optuna.TrialPruned(f"trial {trial.number} pruned at evaluation {pruned[0]}")
+        score()
+        trial.set_user_attr("seconds", time.perf_counter() - start)
+        return costs[-1]
+
+    return objective
+
+
+def check_budget(trials: int, timesteps: int, num_envs: int, evaluations: int, eval_episodes: int) -> None:
+    """ValueError naming the first count below 1 (or evaluations beyond the steps)."""
+    counts = {"--trials": trials, "--timesteps": timesteps, "--num-envs": num_envs,
+              "--evaluations": evaluations, "--eval-episodes": eval_episodes}  # fmt: skip
+    for option, value in counts.items():
+        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+            raise ValueError(f"{option} must be a positive integer, got {value!r}")
+    if evaluations > timesteps:
+        raise ValueError(f"--evaluations {evaluations} exceeds --timesteps {timesteps}")
+
+
+def tune(
+    env_id: str,
+    algo: str,
+    storage: str,
+    study_name: str,
+    trials: int,
+    timesteps: int,
+    seed: int = 0,
+    num_envs: int | None = None,
+    evaluations: int = 4,
+    eval_episodes: int = 10,
+    progress: bool = True,
+) -> Any:
+    """Run ``trials`` trials of the shared study ``study_name`` in ``storage`` (this worker's;
+    other workers add theirs).
+
+    Parameters
+    ----------
+    env_id, algo : str
+        A catalogue env and ppo, sac or td3.
+    storage : str
+        ``journal:PATH`` or an RDB URL (:func:`open_storage`).
+    study_name : str
+        The study; created by the first worker, joined by the others.
+    trials : int
+        Trials this worker runs (finished, pruned or failed).
+    timesteps : int
+        Environment steps per trial (rounded up to whole rollouts as ``ssme-envs train`` does).
+    seed : int
+        Seed of this worker's sampler and of its trials' training.
+    num_envs : int, optional
+        Parallel envs in training (default: ``ssme-envs train``'s).
+    evaluations, eval_episodes : int
+        Evaluations per trial (the pruner's steps) and episodes in each.
+    progress : bool
+        Optuna's log lines (one per trial) on stderr.
+
+    Returns
+    -------
+    optuna.Study
+        The study, with every worker's trials so far.
+    """
+    import optuna
+
+    from agents.policy_files import algorithm_class
+    from agents.sb3 import DEFAULTS
+    from ssme_envs.cli_checks import check_episodes, check_training
+    from ssme_envs.evaluation import check_env_id
+
+    num_envs = DEFAULTS["num_envs"] if num_envs is None else num_envs
+    check_env_id(env_id)
+    algorithm_class(algo)  # ValueError naming the algorithms, or the missing rl extra
+    check_budget(trials, timesteps, num_envs, evaluations, eval_episodes)
+    largest = {"n_steps": max(PPO_N_STEPS)} if algo == "ppo" else {"buffer_size": buffer_size(timesteps)}
+    check_training({"env": env_id, "algo": algo, "num_envs": num_envs, "hyperparameters": largest})
+    check_episodes(eval_episodes, {env_id: 1})
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise ValueError(f"--seed must be a non-negative integer, got {seed!r}")
+    if not study_name:
+        raise ValueError("--study must be a non-empty name")
+    optuna.logging.set_verbosity(optuna.logging.INFO if progress else optuna.logging.WARNING)
+    budget = Budget(timesteps, num_envs, evaluations)
+    attrs = {"env": env_id, "algo": algo, "timesteps": timesteps, "num_envs": num_envs,
+             "evaluations": evaluations, "eval_episodes": eval_episodes}  # fmt: skip
+    study = _study(open_storage(storage), study_name, attrs, seed)
+    objective = make_objective(env_id, algo, budget, eval_episodes, seed)
+    study.optimize(objective, n_trials=trials, catch=(_Diverged,))
+    return study
+
+
+def best_config(study: Any) -> tuple[dict[str, Any], Any]:
+    """The config of the study's best finished trial (all workers'), and that trial;
+    ValueError when no trial has finished."""
+    import optuna
+
+    done = [t for t in study.get_trials(deepcopy=False, states=(optuna.trial.TrialState.COMPLETE,))]
+    if not done:
+        raise ValueError(f"study {study.study_name!r} has no finished trial yet")
+    best = min(done, key=lambda t: (t.value, t.number))
+    return dict(best.user_attrs["config"]), best
+
+
+def write_best_config(study: Any, path: str | Path) -> Path:
+    """Write the best trial's settings as a TOML config of ``ssme-envs train`` (atomically);
+    its ``steps`` are the tuning budget: raise them for a full run."""
+    from agents.sb3 import _toml
+    from ssme_envs.outputs import write_text
+
+    config, trial = best_config(study)
+    if not np.isfinite(trial.value):
+        raise ValueError(f"study {study.study_name!r}: the best trial's cost is {trial.value}")
+    header = (
+        f"# Best trial {trial.number} of Optuna study {study.study_name!r}: cost {trial.value:.6g} "
+        f"(mean over {study.user_attrs.get('eval_episodes')} episodes from seed {EVAL_SEED}).\n"
+        f"# Tuned with {config['steps']:,} steps per trial: raise steps for a full run.\n"
+    )
+    path = Path(path)
+    write_text(path, header + _toml(config))
+    return path
+
+
+def summary(study: Any) -> str:
+    """One line: the study's trials by state and its best trial."""
+    import optuna
+
+    states = [t.state for t in study.get_trials(deepcopy=False)]
+    counts = ", ".join(
+        f"{states.count(s)} {s.name.lower()}" for s in optuna.trial.TrialState if states.count(s)
+    )
+    try:
+        _, best = best_config(study)
+    except ValueError:
+        return f"study {study.study_name!r}: {len(states)} trials ({counts}); none finished"
+    return (f"study {study.study_name!r}: {len(states)} trials ({counts}); best trial {best.number}: "
+            f"cost {best.value:.6g}")  # fmt: skip
+
+
+__all__ = ["EVAL_SEED", "PPO_N_STEPS", "SPACES", "Budget", "best_config", "buffer_size", "check_budget",
+           "make_objective", "open_storage", "policy_cost", "sample_ppo", "sample_sac", "sample_td3",
+           "summary", "tune", "write_best_config"]  # fmt: skip
