@@ -4,7 +4,8 @@ An :class:`EvaluationResult` holds ``{scenario: {controller: ControllerMetrics}}
 separate field, one :class:`~ssme_envs.evaluation.Rollout` per pair for plotting. The metric
 classes also read like the dicts they replace (``m["outputs"]["Pc"]["iae"]``): the reports and
 the studies index them by name, and :meth:`ControllerMetrics.to_dict` is exactly the mapping that
-results.json has always held, so the file format is unchanged.
+results.json holds. Nothing reads results.json back: an older file (with ``saturated_steps``, the
+count of requested actions beyond +-1, where ``time_at_limit`` now stands) is a record only.
 """
 
 from __future__ import annotations
