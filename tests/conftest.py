@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import gymnasium as gym
 import numpy as np
+from gymnasium.vector import AutoresetMode
 
 
 def markov(a: np.ndarray, b: np.ndarray, c: np.ndarray, count: int) -> np.ndarray:
@@ -34,3 +36,31 @@ SHORT_EPISODES = {
     "ssme_envs/NozzleTVC-v0": {"episode_seconds": 0.4},
     "ssme_envs/LauncherPitch-v0": {"episode_seconds": 1.0},
 }
+
+
+def sync_equal(env_id, num_envs, steps, seed, action_scale_up, mode=AutoresetMode.NEXT_STEP, **kwargs):
+    """Step gymnasium's SyncVectorEnv (scalar envs) and the native vector env on the same random
+    actions (uniform within +-action_scale_up): observations, rewards, flags and final
+    observations equal bit for bit; returns the number of episode ends."""
+    sync = gym.make_vec(env_id, num_envs=num_envs, vectorization_mode="sync",
+                        vector_kwargs={"autoreset_mode": mode}, **kwargs)  # fmt: skip
+    native = gym.make_vec(env_id, num_envs=num_envs, vectorization_mode="vector_entry_point",
+                          autoreset_mode=mode, **kwargs)  # fmt: skip
+    a, b = sync.reset(seed=seed), native.reset(seed=seed)
+    np.testing.assert_array_equal(a[0], b[0])
+    rng = np.random.default_rng(seed)
+    ends = 0
+    for k in range(steps):
+        actions = rng.uniform(
+            -action_scale_up, action_scale_up, (num_envs, native.single_action_space.shape[0])
+        ).astype(np.float32)
+        ra, rb = sync.step(actions), native.step(actions)
+        for name, x, y in zip(("obs", "reward", "terminated", "truncated"), ra[:4], rb[:4], strict=True):
+            assert np.array_equal(x, y), f"{name} differs at step {k}"
+        if mode == AutoresetMode.SAME_STEP and (ra[2] | ra[3]).any():
+            assert sorted(ra[4]) == sorted(rb[4])
+            np.testing.assert_array_equal(ra[4]["_final_obs"], rb[4]["_final_obs"])
+            for i in np.flatnonzero(ra[2] | ra[3]):
+                np.testing.assert_array_equal(ra[4]["final_obs"][i], rb[4]["final_obs"][i])
+        ends += int((ra[2] | ra[3]).sum())
+    return ends

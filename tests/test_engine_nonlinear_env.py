@@ -11,6 +11,7 @@ from __future__ import annotations
 import gymnasium as gym
 import numpy as np
 import pytest
+from conftest import sync_equal
 from gymnasium.vector import AutoresetMode
 
 import ssme_envs  # noqa: F401  (registers the environments)
@@ -23,44 +24,23 @@ SHORT_PROFILE = [(0.0, 100.0), (3.0, 100.0), (6.0, 80.0), (10.0, 80.0)]  # 250 s
 QUIET = {"backlash": 0.0, "stiction": 0.0, "sensor_noise": 0.0}
 
 
-def _compare(env_id, num_envs, steps, seed, scale_up, mode=AutoresetMode.NEXT_STEP, **kwargs) -> int:
-    """Step SyncVectorEnv (scalar envs) and the native vector env on the same random actions:
-    observations, rewards and flags equal bit for bit; returns the number of episode ends."""
-    sync = gym.make_vec(env_id, num_envs=num_envs, vectorization_mode="sync",
-                        vector_kwargs={"autoreset_mode": mode}, **kwargs)  # fmt: skip
-    native = gym.make_vec(env_id, num_envs=num_envs, vectorization_mode="vector_entry_point",
-                          autoreset_mode=mode, **kwargs)  # fmt: skip
-    a, b = sync.reset(seed=seed), native.reset(seed=seed)
-    np.testing.assert_array_equal(a[0], b[0])
-    rng = np.random.default_rng(seed)
-    ends = 0
-    for k in range(steps):
-        actions = rng.uniform(-scale_up, scale_up, (num_envs, 2)).astype(np.float32)
-        ra, rb = sync.step(actions), native.step(actions)
-        for name, x, y in zip(("obs", "reward", "terminated", "truncated"), ra[:4], rb[:4], strict=True):
-            assert np.array_equal(x, y), f"{name} differs at step {k}"
-        if mode == AutoresetMode.SAME_STEP and (ra[2] | ra[3]).any():
-            for i in np.flatnonzero(ra[2] | ra[3]):
-                np.testing.assert_array_equal(ra[4]["final_obs"][i], rb[4]["final_obs"][i])
-        ends += int((ra[2] | ra[3]).sum())
-    return ends
-
-
 def test_nonlinear_tracking_scalar_equals_vector_bit_for_bit():
     # truncations in step (every env at one step) over two episodes
-    assert _compare(TRACKING, 3, 520, seed=11, scale_up=1.3, plant="nonlinear") >= 6
+    assert sync_equal(TRACKING, 3, 520, seed=11, action_scale_up=1.3, plant="nonlinear") >= 6
     # terminations at different steps (each env at its own step), a fault, same-step autoreset,
     # between the Table I levels, and the linear flow curve
     stuck = {"kind": "stuck_valve", "time": 1.0, "index": 1}
-    ends = _compare(TRACKING, 5, 200, seed=4, scale_up=2.0, mode=AutoresetMode.SAME_STEP, plant="nonlinear",
-                    power=67.0, action_scale=0.2, fault=stuck)  # fmt: skip
+    ends = sync_equal(TRACKING, 5, 200, seed=4, action_scale_up=2.0, mode=AutoresetMode.SAME_STEP,
+                      plant="nonlinear", power=67.0, action_scale=0.2, fault=stuck)  # fmt: skip
     assert ends >= 20
     linear_flow = {"asymmetric_gains": False}
-    assert _compare(TRACKING, 2, 255, seed=2, scale_up=1.0, plant="nonlinear", truth=linear_flow) == 2
+    assert (
+        sync_equal(TRACKING, 2, 255, seed=2, action_scale_up=1.0, plant="nonlinear", truth=linear_flow) == 2
+    )
 
 
 def test_nonlinear_throttle_scalar_equals_vector_bit_for_bit():
-    ends = _compare(THROTTLE, 4, 520, seed=5, scale_up=1.0, plant="nonlinear", profile=SHORT_PROFILE,
+    ends = sync_equal(THROTTLE, 4, 520, seed=5, action_scale_up=1.0, plant="nonlinear", profile=SHORT_PROFILE,
                     action_scale=0.2, truth={"sensor_noise": 2e-4})  # fmt: skip
     assert ends >= 8
 

@@ -8,6 +8,7 @@ import warnings
 import gymnasium as gym
 import numpy as np
 import pytest
+from conftest import sync_equal
 from gymnasium.vector import AutoresetMode
 
 import ssme_envs  # noqa: F401  (registers the environments)
@@ -31,44 +32,21 @@ def test_gymnasium_and_sb3_checkers_pass_without_warnings(env_id):
     assert [str(w.message) for w in caught] == []
 
 
-def _compare(env_id, num_envs, steps, seed, action_scale_up, mode=AutoresetMode.NEXT_STEP, **kwargs):
-    sync = gym.make_vec(env_id, num_envs=num_envs, vectorization_mode="sync",
-                        vector_kwargs={"autoreset_mode": mode}, **kwargs)  # fmt: skip
-    native = gym.make_vec(env_id, num_envs=num_envs, vectorization_mode="vector_entry_point",
-                          autoreset_mode=mode, **kwargs)  # fmt: skip
-    a, b = sync.reset(seed=seed), native.reset(seed=seed)
-    np.testing.assert_array_equal(a[0], b[0])
-    rng = np.random.default_rng(seed)
-    ends = 0
-    for k in range(steps):
-        actions = rng.uniform(-action_scale_up, action_scale_up, (num_envs, 2)).astype(np.float32)
-        ra, rb = sync.step(actions), native.step(actions)
-        for name, x, y in zip(("obs", "reward", "terminated", "truncated"), ra[:4], rb[:4], strict=True):
-            assert np.array_equal(x, y), f"{name} differs at step {k}"
-        if mode == AutoresetMode.SAME_STEP and (ra[2] | ra[3]).any():
-            assert sorted(ra[4]) == sorted(rb[4])
-            np.testing.assert_array_equal(ra[4]["_final_obs"], rb[4]["_final_obs"])
-            for i in np.flatnonzero(ra[2] | ra[3]):
-                np.testing.assert_array_equal(ra[4]["final_obs"][i], rb[4]["final_obs"][i])
-        ends += int((ra[2] | ra[3]).sum())
-    return ends
-
-
 def test_native_vector_env_equals_sync_vector_env_over_600_steps():
-    ends = _compare(TRACKING, 3, 600, seed=11, action_scale_up=1.3)
+    ends = sync_equal(TRACKING, 3, 600, seed=11, action_scale_up=1.3)
     assert ends >= 6  # every sub-env crossed two episode boundaries
     # a batch wider than the transpose tiles (256), with envs restarting at different steps
-    assert _compare(TRACKING, 300, 260, seed=4, action_scale_up=2.0, action_scale=0.2) >= 300
+    assert sync_equal(TRACKING, 300, 260, seed=4, action_scale_up=2.0, action_scale=0.2) >= 300
 
 
 def test_equality_with_faults_same_step_autoreset_and_terminations():
     fault = {"kind": "stuck_valve", "time": 2.0, "index": 1}
     assert (
-        _compare(TRACKING, 2, 300, seed=3, action_scale_up=1.0, mode=AutoresetMode.SAME_STEP, fault=fault)
+        sync_equal(TRACKING, 2, 300, seed=3, action_scale_up=1.0, mode=AutoresetMode.SAME_STEP, fault=fault)
         >= 2
     )
     # large valve moves leave the envelope at different times: the envs fall out of step
-    ends = _compare(THROTTLE, 4, 600, seed=5, action_scale_up=1.0, profile=SHORT_PROFILE, action_scale=0.2,
+    ends = sync_equal(THROTTLE, 4, 600, seed=5, action_scale_up=1.0, profile=SHORT_PROFILE, action_scale=0.2,
                     truth={"sensor_noise": 2e-4})  # fmt: skip
     assert ends >= 8
 
@@ -76,7 +54,7 @@ def test_equality_with_faults_same_step_autoreset_and_terminations():
 @pytest.mark.parametrize("kind", ["sensor_bias", "gain_loss"])
 def test_equality_with_other_faults(kind):
     fault = {"kind": kind, "time": 1.0, "index": 0}
-    assert _compare(TRACKING, 2, 260, seed=2, action_scale_up=1.0, fault=fault, reference="prbs") >= 2
+    assert sync_equal(TRACKING, 2, 260, seed=2, action_scale_up=1.0, fault=fault, reference="prbs") >= 2
 
 
 def test_registration_and_limits():
