@@ -7,11 +7,18 @@ from pathlib import Path
 
 from ssme_envs.evaluation_result import EvaluationResult
 from ssme_envs.outputs import write_text
-
-TRACKING = "ssme_envs/EngineTracking-v0"
-THROTTLE = "ssme_envs/EngineThrottle-v0"
-NOZZLE = "ssme_envs/NozzleTVC-v0"
-LAUNCHER = "ssme_envs/LauncherPitch-v0"
+from ssme_envs.report_costs import (
+    LAUNCHER,
+    NOZZLE,
+    THROTTLE,
+    TRACKING,
+    WRITTEN_CAUSES,
+    cost_over_zero_tables,
+    is_classical,
+    measured_causes,
+    over_zero,
+    unexplained,
+)
 
 # env -> (controllers, scenarios) that `ssme-envs report` evaluates
 REPORT_PLAN: dict[str, tuple[str, list[str]]] = {
@@ -206,6 +213,7 @@ def write_main_report(
         f"Each controller is designed on the identified model (`name:truth`: on the truth's linear model) "
         f"and evaluated on the truth, {episodes} episodes per scenario, the same seeds for every controller.",
         "",
+        *cost_over_zero_tables(evaluations),
     ]
     if TRACKING in evaluations:
         lines += [*engine_tables(evaluations[TRACKING]), ""]
@@ -252,9 +260,15 @@ __all__ = [
     "PLANTS_PER_EPISODE",
     "REPORT_PLAN",
     "ROBUSTNESS_PLAN",
+    "WRITTEN_CAUSES",
+    "cost_over_zero_tables",
     "engine_tables",
+    "is_classical",
+    "measured_causes",
     "nozzle_tables",
+    "over_zero",
     "rl_table",
     "robustness_folder",
+    "unexplained",
     "write_main_report",
 ]

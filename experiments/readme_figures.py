@@ -1,0 +1,127 @@
+"""The controller and RL figures the README quotes, evaluated by the harness on the shipped
+design models and policies (seed 0, the same episodes for every controller). Writes
+experiments/results/readme_figures.md; tests/test_readme_figures.py checks the README against it.
+
+    python experiments/readme_figures.py [--episodes 50]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from collections.abc import Callable
+from pathlib import Path
+
+from agents import parse_controller
+from ssme_envs.evaluation import evaluate
+from ssme_envs.evaluation_result import EvaluationResult
+from ssme_envs.outputs import write_text
+
+ROOT = Path(__file__).resolve().parent.parent
+OUT = ROOT / "experiments" / "results" / "readme_figures.md"
+TRACKING = "ssme_envs/EngineTracking-v0"
+THROTTLE = "ssme_envs/EngineThrottle-v0"
+NOZZLE = "ssme_envs/NozzleTVC-v0"
+# env -> (controllers, scenarios) evaluated
+RUNS = {
+    TRACKING: (["lqi", "lq:truth", "ppo"], ["nominal", "noise"]),
+    THROTTLE: (["scheduled", "ppo"], ["mission"]),
+    NOZZLE: (["lqi", "hysteresis", "ppo"], ["random_steps", "sine_sweep_strong", "sine_sweep_strong_linear"]),
+}
+
+
+def _cost(r: EvaluationResult, scenario: str, name: str) -> float:
+    return r[scenario][name].cost_mean
+
+
+def _iae(r: EvaluationResult, scenario: str, name: str) -> float:
+    return r[scenario][name].outputs["angle"].iae
+
+
+STRONG_LQI, STRONG_HYS = ("sine_sweep_strong", "lqi"), ("sine_sweep_strong", "hysteresis")
+
+
+def _ratio(value: float) -> str:
+    return f"{value:.2f}x" if value < 2 else f"{value:.1f}x"
+
+
+# figure -> (what it is, how it reads in the README from the evaluations)
+FIGURES: dict[str, tuple[str, Callable[[dict[str, EvaluationResult]], str]]] = {
+    "strong_lqi_over_linear": (
+        "NozzleTVC strong joint, sine sweep: LQ servo's IAE over its IAE on the linear twin",
+        lambda e: _ratio(
+            _iae(e[NOZZLE], "sine_sweep_strong", "lqi") / _iae(e[NOZZLE], "sine_sweep_strong_linear", "lqi")
+        ),
+    ),
+    "strong_compensation_cut": (
+        "NozzleTVC strong joint, sine sweep: IAE cut by the hysteresis compensation",
+        lambda e: f"{100 * (1 - _iae(e[NOZZLE], *STRONG_HYS) / _iae(e[NOZZLE], *STRONG_LQI)):.0f} %",
+    ),
+    "tracking_ppo_over_lqi_nominal": (
+        "EngineTracking nominal: PPO cost over the LQ servo's",
+        lambda e: _ratio(_cost(e[TRACKING], "nominal", "ppo") / _cost(e[TRACKING], "nominal", "lqi")),
+    ),
+    "tracking_ppo_over_lq_truth_nominal": (
+        "EngineTracking nominal: PPO cost over the LQ-optimal tracker's on the true linear model",
+        lambda e: _ratio(_cost(e[TRACKING], "nominal", "ppo") / _cost(e[TRACKING], "nominal", "lq:truth")),
+    ),
+    "tracking_ppo_over_lqi_noise": (
+        "EngineTracking full truth (valves, noise): PPO cost over the LQ servo's",
+        lambda e: _ratio(_cost(e[TRACKING], "noise", "ppo") / _cost(e[TRACKING], "noise", "lqi")),
+    ),
+    "throttle_ppo_over_scheduled": (
+        "EngineThrottle mission: PPO cost over the scheduled servo's",
+        lambda e: _ratio(_cost(e[THROTTLE], "mission", "ppo") / _cost(e[THROTTLE], "mission", "scheduled")),
+    ),
+    "nozzle_ppo_over_lqi": (
+        "NozzleTVC random steps: PPO cost over the LQ servo's",
+        lambda e: _ratio(_cost(e[NOZZLE], "random_steps", "ppo") / _cost(e[NOZZLE], "random_steps", "lqi")),
+    ),
+}
+
+
+def training_steps(env_id: str) -> int:
+    """Steps the shipped PPO policy of ``env_id`` was trained for (its training.json)."""
+    folder = ROOT / "agents" / "policies" / env_id.split("/")[-1]
+    return int(json.loads((folder / "training.json").read_text())["steps"])
+
+
+def evaluations(
+    episodes: int, runs: dict[str, tuple[list[str], list[str]]] = RUNS
+) -> dict[str, EvaluationResult]:
+    """The harness's evaluations behind the figures (seed 0)."""
+    return {
+        env_id: evaluate(env_id, {n: parse_controller(n, env_id) for n in names}, scenarios, episodes, seed=0)
+        for env_id, (names, scenarios) in runs.items()
+    }
+
+
+def table(results: dict[str, EvaluationResult], episodes: int) -> str:
+    """readme_figures.md: one row per figure, then the shipped policies' training steps."""
+    lines = [
+        "# Figures quoted in the README",
+        "",
+        f"Command: `python experiments/readme_figures.py --episodes {episodes}`. The harness "
+        f"(`ssme_envs.evaluation.evaluate`, seed 0, {episodes} episodes per scenario, the same for "
+        "every controller) on the shipped design models and PPO policies (`agents/policies/`).",
+        "",
+        "| figure | value | what |",
+        "|---|---|---|",
+    ]
+    lines += [f"| {key} | {fn(results)} | {what} |" for key, (what, fn) in FIGURES.items()]
+    lines += ["", "| policy | training steps |", "|---|---|"]
+    lines += [f"| {env_id} | {training_steps(env_id):,} |" for env_id in (TRACKING, THROTTLE, NOZZLE)]
+    return "\n".join(lines) + "\n"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--episodes", type=int, default=50)
+    args = parser.parse_args()
+    text = table(evaluations(args.episodes), args.episodes)
+    write_text(OUT, text)
+    print(text)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,172 @@
+"""The main report's table of each controller's cost over the zero action, and why a classical
+controller costs more than doing nothing: causes measured by the metrics, or written down from
+runs of the scenario."""
+
+from __future__ import annotations
+
+import math
+
+from ssme_envs.evaluation_result import ControllerMetrics, EvaluationResult
+
+TRACKING = "ssme_envs/EngineTracking-v0"
+THROTTLE = "ssme_envs/EngineThrottle-v0"
+NOZZLE = "ssme_envs/NozzleTVC-v0"
+LAUNCHER = "ssme_envs/LauncherPitch-v0"
+
+# learned controllers: their names before the colon; everything else but `zero` is classical
+LEARNED = ("ppo", "sac", "td3")
+_PI_COUPLING = (
+    "its SIMC gains, tuned loop by loop on the 100 % model with the cross-coupling ignored, leave "
+    "each loop alone stable at every power, but the coupled linear loop unstable at the mission's "
+    "low-power levels (closed-loop spectral radius above 1 on the linked model at 90 % and below): "
+    "the oscillation grows until FPOV hits its limit, on the linear plant as on the truth; the "
+    "`scheduled` servo is the engineer's answer"
+)
+_STUCK_COUPLED = (
+    "once OPOV sticks (at 4 s) its coupled gain still sets FPOV as if OPOV answered, so FPOV chases "
+    "the Pc error along its own direction and drives MR away: after the fault both errors exceed "
+    "the untracked references'. Integral windup is not the cause: `lq:truth`, with negligible "
+    "integral action and OPOV rarely at its limit, costs as much. The decoupled PI (FPOV on MR "
+    "alone) stays below the zero action"
+)
+_STRONG_PID = (
+    "on the strong joint, which yields past about 1.7 deg, the PID (placed on the small-signal "
+    "stiffness, no reference feedforward) overshoots at the sweep's fast end to 5-6 deg where the "
+    "reference peaks below 3 deg and leaves the +-6 deg envelope; on the same joint's linear twin "
+    "it stays inside"
+)
+_PPO_FAULT = (
+    "trained on the fault-free truth (experiments/configs/ppo_engine_tracking.toml sets no fault): "
+    "it has never seen a stuck valve"
+)
+# (env, scenario, controller) -> why it costs more than the zero action, found by runs of the
+# scenario (rollouts, the linear loop's eigenvalues); the measured lines come with it
+WRITTEN_CAUSES: dict[tuple[str, str, str], str] = {
+    **{(THROTTLE, s, "pi"): _PI_COUPLING for s in ("mission", "mission_linear")},
+    **{(TRACKING, "stuck_valve", c): _STUCK_COUPLED for c in ("lqi", "lqi:truth", "lq:truth")},
+    **{(TRACKING, "stuck_valve", c): _PPO_FAULT for c in ("ppo", "ppo:identified")},
+    (NOZZLE, "sine_sweep_strong", "pid"): _STRONG_PID,
+}
+SATURATED = 0.05  # time at the limit (share) from which it is named as a cause
+
+
+def is_classical(controller: str) -> bool:
+    """Whether a controller spec names a classical design (not `zero`, not a learned policy)."""
+    return controller != "zero" and controller.split(":")[0] not in LEARNED
+
+
+def measured_causes(metrics: ControllerMetrics, unit: str) -> list[str]:
+    """What the metrics show that raises a cost: early ends, limit cycles, actuators at their
+    limits (``unit``: the outputs' unit)."""
+    causes = []
+    if metrics.terminations:
+        causes.append(
+            f"ended early in {metrics.terminations} of {metrics.episodes} episodes (each charged the "
+            "cost of the steps it had left)"
+        )
+    for name, out in metrics.outputs.items():
+        if math.isfinite(out.limit_cycle_fraction) and out.limit_cycle_fraction > 0:
+            causes.append(
+                f"limit cycle in {100 * out.limit_cycle_fraction:.0f} % of episodes "
+                f"({out.limit_cycle_period:.2f} s, +-{out.limit_cycle_amplitude:.2g} {unit} {name})"
+            )
+    for name, act in metrics.actuators.items():
+        if act.time_at_limit >= SATURATED:
+            causes.append(f"{name} at its limit {100 * act.time_at_limit:.0f} % of the time")
+    return causes
+
+
+def _worse_tracking(metrics: ControllerMetrics, zero: ControllerMetrics) -> str:
+    """The outputs tracked worse than with no action, as ISE ratios (a symptom, not a cause)."""
+    worse = [
+        f"{name} ISE {out.ise / zero.outputs[name].ise:.1f}x the zero action's"
+        for name, out in metrics.outputs.items()
+        if name in zero.outputs and zero.outputs[name].ise > 0 and out.ise > zero.outputs[name].ise
+    ]
+    return f" ({', '.join(worse)})" if worse else ""
+
+
+def over_zero(results: EvaluationResult) -> dict[tuple[str, str], float]:
+    """``{(scenario, controller): cost / zero's cost}`` of every controller but `zero`, on the
+    scenarios where `zero` ran with a positive cost."""
+    ratios = {}
+    for scenario, rows in results.items():
+        zero = rows.get("zero")
+        if zero is None or not zero.cost_mean > 0:
+            continue
+        for name, m in rows.items():
+            if name != "zero":
+                ratios[(scenario, name)] = m.cost_mean / zero.cost_mean
+    return ratios
+
+
+def unexplained(results: EvaluationResult) -> list[tuple[str, str]]:
+    """(scenario, controller) of the classical controllers above the zero action with neither a
+    measured nor a written cause."""
+    from ssme_envs.evaluation import LAYOUTS
+
+    unit = LAYOUTS[results.env_id].unit
+    return [
+        (s, c)
+        for (s, c), ratio in over_zero(results).items()
+        if ratio > 1.0 and is_classical(c) and not measured_causes(results[s][c], unit)
+        and (results.env_id, s, c) not in WRITTEN_CAUSES
+    ]  # fmt: skip
+
+
+def cost_over_zero_tables(evaluations: dict[str, EvaluationResult]) -> list[str]:
+    """One table per env of each controller's cost over the zero action's, and below it why each
+    controller above 1.0 is there: measured causes, written ones, or UNEXPLAINED."""
+    from ssme_envs.evaluation import LAYOUTS
+
+    lines = [
+        "### Cost over the zero action",
+        "",
+        "Each controller's mean episode cost divided by the zero action's on the same episodes: "
+        "below 1.0 the controller beats doing nothing. Every controller above 1.0 has its cause "
+        "below its table, from the metrics (early ends, limit cycles, time at the valve or torque "
+        "limit) and from runs of the scenario.",
+        "",
+    ]
+    for env_id, results in evaluations.items():
+        ratios, unit = over_zero(results), LAYOUTS[env_id].unit
+        names = list(dict.fromkeys(c for rows in results.values() for c in rows if c != "zero"))
+        lines += [f"#### {env_id}", "", "| scenario | zero's cost | " + " | ".join(names) + " |"]
+        lines.append("|---" * (len(names) + 2) + "|")
+        for scenario, rows in results.items():
+            cells = [f"{ratios[(scenario, c)]:.2f}" if (scenario, c) in ratios else "-" for c in names]
+            zero = f"{rows['zero'].cost_mean:.3f}" if "zero" in rows else "-"
+            lines.append(f"| {scenario} | {zero} | " + " | ".join(cells) + " |")
+        above = [(s, c, r) for (s, c), r in ratios.items() if r > 1.0]
+        lines.append("")
+        for scenario, name, ratio in above:
+            m = results[scenario][name]
+            causes = measured_causes(m, unit)
+            written = WRITTEN_CAUSES.get((env_id, scenario, name))
+            said = "; ".join(causes + ([written] if written else []))
+            if not said:
+                said = (
+                    "**UNEXPLAINED**: no measured or written cause" if is_classical(name)
+                    else "a learned policy; no measured cause"
+                )  # fmt: skip
+            tracking = _worse_tracking(m, results[scenario]["zero"])
+            lines.append(f"- {name} on {scenario}, {ratio:.2f}x{tracking}: {said}.")
+        if above:
+            lines.append("")
+    return lines
+
+
+__all__ = [
+    "LAUNCHER",
+    "LEARNED",
+    "NOZZLE",
+    "SATURATED",
+    "THROTTLE",
+    "TRACKING",
+    "WRITTEN_CAUSES",
+    "cost_over_zero_tables",
+    "is_classical",
+    "measured_causes",
+    "over_zero",
+    "unexplained",
+]

@@ -1,0 +1,88 @@
+"""The main report's cost-over-zero tables: ratios, the causes printed for a controller above the
+zero action, UNEXPLAINED when there is none, and none for the shipped report plan."""
+
+import math
+
+import pytest
+
+from ssme_envs.evaluation_result import ActuatorMetrics, ControllerMetrics, EvaluationResult, OutputMetrics
+from ssme_envs.main_report import REPORT_PLAN, THROTTLE, cost_over_zero_tables, unexplained
+
+NAN = math.nan
+
+
+def _output(ise: float, cycles: float = 0.0, period: float = NAN, amplitude: float = NAN) -> OutputMetrics:
+    return OutputMetrics(1.0, ise, 1.0, 0.0, NAN, NAN, NAN, cycles, period, amplitude, 3.0)
+
+
+def _metrics(cost: float, ise: float = 1.0, at_limit: float = 0.0, cycles: float = 0.0,
+             terminations: int = 0) -> ControllerMetrics:  # fmt: skip
+    outputs = {
+        "Pc": _output(ise, cycles, 0.33 if cycles else NAN, 1.3 if cycles else NAN),
+        "MR": _output(ise),
+    }
+    actuators = {
+        "OPOV": ActuatorMetrics(0.1, 1.0, 2.0, 0.0),
+        "FPOV": ActuatorMetrics(0.1, 1.0, 2.0, at_limit),
+    }
+    return ControllerMetrics(8, -cost, 0.0, cost, cost, terminations, outputs, actuators)
+
+
+def _result(rows: dict[str, ControllerMetrics], scenario: str = "made_up") -> EvaluationResult:
+    result = EvaluationResult(THROTTLE)
+    for name, m in rows.items():
+        result.scenarios.setdefault(scenario, {})[name] = m
+    return result
+
+
+def _cause_lines(result: EvaluationResult) -> list[str]:
+    return [line for line in cost_over_zero_tables({THROTTLE: result}) if line.startswith("- ")]
+
+
+def test_ratio_cells_are_cost_over_zero():
+    lines = cost_over_zero_tables({THROTTLE: _result({"zero": _metrics(40.0), "fast": _metrics(10.0)})})
+    assert "| made_up | 40.000 | 0.25 |" in lines
+    assert not [line for line in lines if line.startswith("- ")]  # nothing above 1.0
+
+
+def test_a_limit_cycle_and_saturation_are_named():
+    result = _result(
+        {"zero": _metrics(50.0, ise=2.0), "wobbly": _metrics(150.0, ise=5.0, at_limit=0.18, cycles=1.0)}
+    )
+    (line,) = _cause_lines(result)
+    assert line.startswith("- wobbly on made_up, 3.00x (Pc ISE 2.5x the zero action's, MR ISE 2.5x")
+    assert "limit cycle in 100 % of episodes (0.33 s, +-1.3 % Pc)" in line
+    assert "FPOV at its limit 18 % of the time" in line
+    assert "UNEXPLAINED" not in line and unexplained(result) == []
+
+
+def test_early_ends_are_named():
+    (line,) = _cause_lines(_result({"zero": _metrics(50.0), "falls": _metrics(60.0, terminations=3)}))
+    assert "ended early in 3 of 8 episodes" in line
+
+
+def test_no_cause_is_unexplained_for_a_classical_controller_only():
+    result = _result(
+        {"zero": _metrics(50.0), "mystery": _metrics(55.0, at_limit=0.01), "ppo": _metrics(70.0)}
+    )
+    lines = _cause_lines(result)
+    assert any(line.startswith("- mystery") and "**UNEXPLAINED**" in line for line in lines)
+    assert any(line.startswith("- ppo") and "UNEXPLAINED" not in line for line in lines)
+    assert unexplained(result) == [("made_up", "mystery")]
+
+
+def test_a_written_cause_explains():
+    result = _result({"zero": _metrics(50.0), "pi": _metrics(55.0)}, scenario="mission")
+    (line,) = _cause_lines(result)
+    assert "cross-coupling" in line and unexplained(result) == []
+
+
+@pytest.mark.slow
+def test_the_shipped_report_plan_has_no_unexplained_classical_controller():
+    from agents import parse_controller
+    from ssme_envs.evaluation import evaluate
+
+    for env_id, (specs, scenarios) in REPORT_PLAN.items():
+        names = [s for s in specs.split(",") if not s.startswith("ppo")]
+        result = evaluate(env_id, {n: parse_controller(n, env_id) for n in names}, scenarios, episodes=4)
+        assert unexplained(result) == [], env_id
