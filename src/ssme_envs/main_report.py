@@ -246,7 +246,8 @@ def write_main_report(
         ]
         for env_id in robust:
             folder = robustness_folder(env_id)
-            lines += [*_embedded(out / folder / "robustness.md", folder)[1:], ""]
+            embedded = _embedded(out / folder / "robustness.md", folder)  # "## Robustness on ..."
+            lines += [("#" + line if line.startswith("#") else line) for line in embedded] + [""]
     lines += ["## Identification", ""]
     for folder in ("engine", "nozzle"):
         if (out / folder / "report.md").exists():
