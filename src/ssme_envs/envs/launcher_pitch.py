@@ -11,6 +11,7 @@ from typing import Any, ClassVar, NamedTuple
 import gymnasium as gym
 import numpy as np
 
+from ssme_envs.envs import nozzle_task
 from ssme_envs.envs.nozzle_task import (
     DEG,
     ENV_STEP_RATE,
@@ -210,10 +211,9 @@ class LauncherTask:
     def initial_observation(self, ref: np.ndarray, draws: np.ndarray) -> np.ndarray:
         """Observations at reset (7, N) float32 from the first reference and noise rows (1, N)."""
         m = self.nozzle.measure(0.0, np.asarray(draws[0], dtype=np.float64), 0, SYNCED)
-        zeros = np.zeros_like(m)
-        return np.stack([m * DEG, zeros, ref[0] * DEG, (ref[0] - m) * DEG, zeros, zeros, zeros]).astype(
-            np.float32
-        )
+        obs = np.zeros((7, m.size), dtype=np.float32)  # rows rounded to float32 as they are set
+        obs[0], obs[2], obs[3] = m * DEG, ref[0] * DEG, (ref[0] - m) * DEG
+        return obs
 
     def step(
         self, state: LauncherState, action: Sequence[Value], t: Any, ref: Sequence[Value],
@@ -230,21 +230,29 @@ class LauncherTask:
         gain_loss = fault is not None and fault.kind == "gain_loss"
         if gain_loss:  # times 1.0 before the fault: exact
             servo_gain = ops.where(t > self.fault_step, fault.magnitude, 1.0)
-        p00, p01, p10, p11, g0_theta, g0_q, g1_theta, g1_q = self.body
         h = self.dt / self.substeps
         params, rk4_steps = self.rk4_params if joint is None else joint, self.rk4_substeps
         rk4_h = h / rk4_steps  # h itself for one step
-        for _ in range(self.substeps):
-            d = nozzle[0]
-            torque = ops.clip(drive - k_p * d - k_d * nozzle[1], -lim, lim)
-            if gain_loss:
-                torque = torque * servo_gain
-            # the body's share of the old deflection is taken before the nozzle moves (in place)
-            theta_next = p00 * theta + p01 * q + g0_theta * d
-            q_next = p10 * theta + p11 * q + g0_q * d
-            nozzle = integrate(nozzle, torque, rk4_h, rk4_steps, params, ops)
-            d = nozzle[0]
-            theta, q = theta_next + g1_theta * d, q_next + g1_q * d
+        if not ops.batched:  # one env: the loop below on floats, without the carrier's calls
+            # the float integrator looked up where integrate looks it up (nozzle_task's)
+            x, v, w, theta, q = _servo_floats(
+                *nozzle, theta, q, drive, servo_gain if gain_loss else None, self.servo, lim, self.body,
+                rk4_h, rk4_steps, self.substeps, params, nozzle_task.rk4_floats,
+            )  # fmt: skip
+            nozzle = (x, v, w)
+        else:
+            p00, p01, p10, p11, g0_theta, g0_q, g1_theta, g1_q = self.body
+            for _ in range(self.substeps):
+                d = nozzle[0]
+                torque = ops.clip(drive - k_p * d - k_d * nozzle[1], -lim, lim)
+                if gain_loss:
+                    torque = torque * servo_gain
+                # the body's share of the old deflection is taken before the nozzle moves (in place)
+                theta_next = p00 * theta + p01 * q + g0_theta * d
+                q_next = p10 * theta + p11 * q + g0_q * d
+                nozzle = integrate(nozzle, torque, rk4_h, rk4_steps, params, ops)
+                d = nozzle[0]
+                theta, q = theta_next + g1_theta * d, q_next + g1_q * d
         m, e, integral, reward, terminated = self.nozzle.score(
             theta, a, prev, t, ref, noise[0], integral, ops
         )
@@ -254,6 +262,30 @@ class LauncherTask:
     def render_row(self, state: LauncherState, obs: Sequence[float], ref: Sequence[float]) -> list[float]:
         """The measured attitude (rad), its reference, the nozzle deflection as a fraction of 3 deg."""
         return [obs[0] / DEG, ref[0], state.nozzle[0] / self.max_deflection]
+
+
+def _servo_floats(
+    x: float, v: float, w: float, theta: float, q: float, drive: float, gain: float | None,
+    servo: tuple, lim: float, body: tuple, rk4_h: float, rk4_steps: int, samples: int, params: RK4Parameters,
+    rk4_floats: Callable[..., tuple[float, float, float]],
+) -> tuple[float, float, float, float, float]:  # fmt: skip
+    """``samples`` servo samples of one launcher on floats, the operations of
+    :meth:`LauncherTask.step`'s loop in its order: the nozzle (x, v, w), attitude and pitch rate
+    after them."""
+    _, k_p, k_d = servo
+    p00, p01, p10, p11, g0_theta, g0_q, g1_theta, g1_q = body
+    low = -lim
+    for _ in range(samples):
+        torque = drive - k_p * x - k_d * v
+        torque = low if low > torque else torque  # min(max(torque, -lim), lim), as FLOATS.clip
+        torque = lim if lim < torque else torque
+        if gain is not None:
+            torque = torque * gain
+        theta_next = p00 * theta + p01 * q + g0_theta * x
+        q_next = p10 * theta + p11 * q + g0_q * x
+        x, v, w = rk4_floats(x, v, w, torque, rk4_h, rk4_steps, params)
+        theta, q = theta_next + g1_theta * x, q_next + g1_q * x
+    return x, v, w, theta, q
 
 
 class LauncherPitchEnv(TrackingEnv):

@@ -286,9 +286,9 @@ class NozzleTask:
     def initial_observation(self, ref: np.ndarray, draws: np.ndarray) -> np.ndarray:
         """Observations at reset (6, N) float32 from the first reference and noise rows (1, N)."""
         m = self.measure(0.0, np.asarray(draws[0], dtype=np.float64), 0, SYNCED)
-        e = (ref[0] - m) * DEG
-        zeros = np.zeros_like(m)
-        return np.stack([m * DEG, zeros, ref[0] * DEG, e, zeros, zeros]).astype(np.float32)
+        obs = np.zeros((6, m.size), dtype=np.float32)  # rows rounded to float32 as they are set
+        obs[0], obs[2], obs[3] = m * DEG, ref[0] * DEG, (ref[0] - m) * DEG
+        return obs
 
     def measure(self, x: Value, noise: Value, t: Any, ops: Carrier) -> Value:
         """The sensor: x (rad) with noise and the sensor-bias fault."""

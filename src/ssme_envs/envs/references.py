@@ -63,9 +63,9 @@ def reference_signals(
     """References of k episodes of ``length`` steps, their steps [start, stop) (default: all),
     shape (channels, stop - start, k), from uniforms in [0, 1) of shape (:func:`uniforms_needed`, k), for
     deviations within +-amplitude per channel. The episode axis is last, the layout in which the
-    vector envs read one step of every env. Steps [start, stop) cost in proportion to ``stop``
-    (the steps before them are what a held or filtered level depends on) and equal the same
-    steps of the whole episode.
+    vector envs read one step of every env. Steps [start, stop) equal the same steps of the whole
+    episode; they cost in proportion to ``stop - start`` for random_steps, to ``stop`` for
+    the kinds whose level depends on every step before (attitude, prbs).
 
     Kinds
     -----
@@ -117,16 +117,19 @@ def reference_signals(
         holds = shortest + np.floor(uniforms[:count] * (longest - shortest + 1)).astype(np.intp)
         levels = (2.0 * uniforms[count:].reshape(count, channels, k) - 1.0) * amplitude[:, None]
         ends = np.cumsum(holds, axis=0)
-        # flat index of (hold, episode) at every step: episode i starts at i and moves on by k
-        # at each new hold
-        index = np.zeros((stop, k), dtype=np.intp)
+        # flat index of (hold, episode) at every step: episode i at hold j is j k + i; the block
+        # starts from the holds ended by its first step and moves on by k at each new hold, so
+        # that a block costs its own steps, not the episode's prefix
+        index = np.zeros((stop - start, k), dtype=np.intp)
         index[0] = np.arange(k)
-        rows, cols = np.nonzero(ends < stop)
-        index[ends[rows, cols], cols] = k
+        if start:  # no hold ends at step 0
+            index[0] += k * np.add.reduce(ends <= start, axis=0, dtype=np.intp)
+        rows, cols = np.nonzero((ends > start) & (ends < stop) if start else ends < stop)
+        index[ends[rows, cols] - start, cols] = k
         _accumulate_rows(index)
         refs = np.empty((channels, stop - start, k))
         for c in range(channels):  # mode "clip" (indices are in range) writes without buffering
-            np.take(np.ascontiguousarray(levels[:, c]), index[start:], out=refs[c], mode="clip")
+            np.take(np.ascontiguousarray(levels[:, c]), index, out=refs[c], mode="clip")
         return refs
     if kind == "step":
         at = np.floor(uniforms[0] * max(1, int(0.4 * length)))

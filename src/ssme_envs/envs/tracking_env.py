@@ -112,7 +112,7 @@ class TrackingEnv(gym.Env):
         self._noise: list[list[float]] = []
         refs, noise = self._extend()
         obs = task.initial_observation(refs[:, 0], noise[:, 0])[:, 0]
-        obs = np.clip(obs, self._low, self._high)
+        obs = CLIP_UFUNC(obs, self._low, self._high)
         m = task.plant_draw_size  # the last uniforms of the draw: the episode's plant
         self._state = task.initial_state(None, self._uniforms[task.draw_size - m :] if m else None)
         self._t = 0

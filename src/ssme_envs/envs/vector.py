@@ -192,7 +192,7 @@ class TrackingVectorEnv(VectorEnv):
         self._ready[envs] = 0
         refs, noise = self._compute(envs, 0)
         obs = task.initial_observation(refs[:, 0], noise[:, 0]).T
-        return np.clip(obs, self._low, self._high)
+        return CLIP_UFUNC(obs, self._low, self._high)
 
     def _extend(self, t: np.ndarray) -> None:
         """Compute the next block of the episodes that reach their uncomputed steps at ``t``."""

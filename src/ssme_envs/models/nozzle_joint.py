@@ -188,34 +188,44 @@ def rk4_floats(
     x (rad), v (rad/s) and w (rad, normalized hysteresis) in, the same out."""
     inv_j, b_j, k_el_j, k_hys_j, beta, gamma, n, floor, hys = p
     accel0 = tau * inv_j
-    power, copysign = np.power, math.copysign
     half, sixth = 0.5 * h, h / 6.0
-
+    if not hys:  # the linear joint: w moves as x does (its rate is v), the same increments
+        for _ in range(steps):
+            a1 = accel0 - b_j * v - k_el_j * x - k_hys_j * w
+            x2, v2, w2 = half * v + x, half * a1 + v, half * v + w
+            a2 = accel0 - b_j * v2 - k_el_j * x2 - k_hys_j * w2
+            x3, v3, w3 = half * v2 + x, half * a2 + v, half * v2 + w
+            a3 = accel0 - b_j * v3 - k_el_j * x3 - k_hys_j * w3
+            x4, v4, w4 = h * v3 + x, h * a3 + v, h * v3 + w
+            a4 = accel0 - b_j * v4 - k_el_j * x4 - k_hys_j * w4
+            dx = sixth * ((v2 + v3) * 2.0 + v + v4)
+            x, v, w = dx + x, sixth * ((a2 + a3) * 2.0 + a1 + a4) + v, dx + w
+        return x, v, w
+    power, copysign = np.power, math.copysign
     # The Bouc-Wen rate v (1 - (beta + gamma sign(v w)) |w|^n) written out at each stage: a
-    # function call per stage would cost a tenth of the step.
+    # function call per stage would cost a tenth of the step. max(|w|, floor) is spelled as
+    # the builtin decides (its first argument unless the second is strictly larger, NaN kept).
     for _ in range(steps):
         a1 = accel0 - b_j * v - k_el_j * x - k_hys_j * w
-        w1 = v * (1.0 - (copysign(gamma, v * w) + beta) * float(power(max(abs(w), floor), n))) if hys else v
+        aw = abs(w)
+        w1 = v * (1.0 - (copysign(gamma, v * w) + beta) * float(power(floor if floor > aw else aw, n)))
         x2, v2, w2 = half * v + x, half * a1 + v, half * w1 + w
         a2 = accel0 - b_j * v2 - k_el_j * x2 - k_hys_j * w2
-        w2_rate = (
-            v2 * (1.0 - (copysign(gamma, v2 * w2) + beta) * float(power(max(abs(w2), floor), n)))
-            if hys
-            else v2
+        aw = abs(w2)
+        w2_rate = v2 * (
+            1.0 - (copysign(gamma, v2 * w2) + beta) * float(power(floor if floor > aw else aw, n))
         )
         x3, v3, w3 = half * v2 + x, half * a2 + v, half * w2_rate + w
         a3 = accel0 - b_j * v3 - k_el_j * x3 - k_hys_j * w3
-        w3_rate = (
-            v3 * (1.0 - (copysign(gamma, v3 * w3) + beta) * float(power(max(abs(w3), floor), n)))
-            if hys
-            else v3
+        aw = abs(w3)
+        w3_rate = v3 * (
+            1.0 - (copysign(gamma, v3 * w3) + beta) * float(power(floor if floor > aw else aw, n))
         )
         x4, v4, w4 = h * v3 + x, h * a3 + v, h * w3_rate + w
         a4 = accel0 - b_j * v4 - k_el_j * x4 - k_hys_j * w4
-        w4_rate = (
-            v4 * (1.0 - (copysign(gamma, v4 * w4) + beta) * float(power(max(abs(w4), floor), n)))
-            if hys
-            else v4
+        aw = abs(w4)
+        w4_rate = v4 * (
+            1.0 - (copysign(gamma, v4 * w4) + beta) * float(power(floor if floor > aw else aw, n))
         )
         x = sixth * ((v2 + v3) * 2.0 + v + v4) + x
         v = sixth * ((a2 + a3) * 2.0 + a1 + a4) + v
