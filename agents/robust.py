@@ -9,8 +9,8 @@ around the *design model* (never the plant it is judged on), on the env's own re
 noise, from seeds of their own (:data:`DESIGN_SEED`: not the evaluation's). The tuning is by
 simulation of the design model, so it also sees what the servo's linear model leaves out (the
 joint's hysteresis; on LauncherPitch the nozzle's own dynamics): it can beat the nominal servo
-on the nominal plant too. The spread is the
-env's ``plant_spread`` when it has one, else :data:`~ssme_envs.robustness.DEFAULT_SPREAD`.
+on the nominal plant too. The spread is the env's ``plant_spread`` when it has one, else
+:data:`~ssme_envs.robustness.DEFAULT_SPREAD`.
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ from agents.base import BatchController, task_of
 from agents.lqi import LQIServo, design_servo
 from agents.plants import linear_design, nozzle_joint
 from ssme_envs.envs.nozzle_task import rule_substeps
-from ssme_envs.envs.plant_spread import PlantSpread
+from ssme_envs.envs.plant_spread import NAMES, PlantSpread
 from ssme_envs.robustness import DEFAULT_SPREAD, cvar, episode_costs
 
 DESIGN_PLANTS = 64
@@ -43,8 +43,8 @@ def design_task(task: Any, source: str) -> Any:
     if spread is None:
         tuned = PlantSpread.relative_spread(joint, DEFAULT_SPREAD)
     else:
-        mean = np.array(list(joint.normalized().values()))
-        tuned = dataclasses.replace(spread, mean=mean)
+        norm = joint.normalized()
+        tuned = dataclasses.replace(spread, mean=np.array([norm[name] for name in NAMES]))
     substeps = (
         nozzle.substeps
         if nozzle is not task
