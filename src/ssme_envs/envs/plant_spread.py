@@ -111,7 +111,8 @@ class PlantSpread:
         )  # fmt: skip
         low, _ = spread.bounds()
         for name, value, nominal in zip(NAMES, low, spread.mean, strict=True):
-            if value < POSITIVE_FLOOR[name] * nominal:
+            # (a negative beta_n is a Bouc-Wen shape of its own: the corners' joints check it)
+            if nominal > 0 and value < POSITIVE_FLOOR[name] * nominal:
                 raise ValueError(
                     f"plant_spread='uncertainty' (scale {scale:g}) lets {name} reach {value:.4g} at 3 sigma "
                     f"(nominal {nominal:.4g}): too wide for a physical joint; lower uncertainty_scale"
