@@ -85,7 +85,7 @@ CONTROLLERS: dict[str, tuple[Callable[[Any, str], Controller], tuple[str, ...], 
     "lq": (_lq_tracker, (TRACKING,), "identified"),
     "robust": (_robust, (NOZZLE, LAUNCHER), "identified"),
     # learned on the truth by default: a policy is trained on an env, not designed on a model
-    "ppo": (_shipped_ppo, (TRACKING, THROTTLE, NOZZLE), "truth"),
+    "ppo": (_shipped_ppo, (TRACKING, THROTTLE, NOZZLE, LAUNCHER), "truth"),
 }
 
 

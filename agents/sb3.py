@@ -68,6 +68,7 @@ SHIPPED = (
     "EngineThrottle-v0",
     "NozzleTVC-v0",
     "NozzleTVC-v0-spread",  # trained with plant_spread=0.2 (experiments/configs/ppo_nozzle_tvc_spread.toml)
+    "LauncherPitch-v0",
 )
 
 

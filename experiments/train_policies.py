@@ -1,12 +1,14 @@
-"""Train the PPO policies of experiments/configs and ship three of them with the package.
+"""Train the PPO policies of experiments/configs and ship those of SHIP with the package.
 
 Each config trains on this machine's CPU through the SB3 adapter (VecNormalize, the best
 evaluation kept) into experiments/runs/<config>/ (policy.json, policy.safetensors,
-normalization.json: no pickle); the EngineTracking, EngineThrottle and NozzleTVC policies trained
-on the full truth are copied into agents/policies/<env>/. Every run is then
+normalization.json: no pickle); the policies of SHIP (each env's, trained on its full truth) are
+copied into agents/policies/<name>/. Every run is then
 evaluated by the harness beside the LQ servo (or the scheduled one) on the plant it was trained
 for and on the full truth. The policy trained on EngineTracking's identified model is shipped too
-(the sim-to-real comparison). Writes experiments/results/rl_training.md.
+(the sim-to-real comparison), and NozzleTVC's fine-tuned on drawn plants (after the nominal one,
+which it starts from). Writes experiments/results/rl_training.md; then run
+experiments/launcher_rl.py, which appends the LauncherPitch section.
 
     python experiments/train_policies.py [--evaluate-only] [config names ...]
 
@@ -31,6 +33,7 @@ SHIP = {
     "ppo_engine_throttle": "EngineThrottle-v0",
     "ppo_nozzle_tvc": "NozzleTVC-v0",
     "ppo_nozzle_tvc_spread": "NozzleTVC-v0-spread",  # after ppo_nozzle_tvc: it starts from that policy
+    "ppo_launcher_pitch": "LauncherPitch-v0",
 }
 # the scenarios of the plant each config trains on (then the full truth's)
 PLANT = {
@@ -41,14 +44,16 @@ PLANT = {
     "ppo_nozzle_tvc": ("random_steps", "step", "sine_sweep", "attitude"),
     "ppo_nozzle_tvc_mixed": ("random_steps", "step", "sine_sweep", "attitude"),
     "ppo_nozzle_tvc_spread": ("random_steps", "step", "sine_sweep", "attitude"),
+    "ppo_launcher_pitch": ("random_steps", "step", "attitude", "linear_nozzle"),
 }
 TRUTH = {"ssme_envs/EngineTracking-v0": "noise", "ssme_envs/EngineThrottle-v0": "mission",
-         "ssme_envs/NozzleTVC-v0": "random_steps"}  # fmt: skip
+         "ssme_envs/NozzleTVC-v0": "random_steps", "ssme_envs/LauncherPitch-v0": "random_steps"}  # fmt: skip
 # the LQ servo designed on the identified model (as users would), and a second reference: on
 # EngineTracking the reward's LQ-optimal tracker on the true linear model (the physical limit)
 BASELINES = {"ssme_envs/EngineTracking-v0": ("lqi", "lq:truth"),
              "ssme_envs/EngineThrottle-v0": ("scheduled", "scheduled:truth"),
-             "ssme_envs/NozzleTVC-v0": ("lqi", "hysteresis")}  # fmt: skip
+             "ssme_envs/NozzleTVC-v0": ("lqi", "hysteresis"),
+             "ssme_envs/LauncherPitch-v0": ("pid", "robust")}  # fmt: skip
 
 
 def main(names: list[str], evaluate_only: bool = False) -> None:

@@ -95,7 +95,11 @@ def test_shipped_policies_load_and_beat_the_zero_action(name):
     env_id, trained_on = f"ssme_envs/{env_name}-v0", suffix.removeprefix("-") or "truth"
     files = sorted(p.name for p in shipped_policy(env_id, trained_on).iterdir())
     assert files == RUN_FILES
-    scenario = {"EngineThrottle": "mission", "NozzleTVC": "random_steps"}.get(env_name, "noise")
+    scenario = {
+        "EngineThrottle": "mission",
+        "NozzleTVC": "random_steps",
+        "LauncherPitch": "random_steps",
+    }.get(env_name, "noise")
     factories = {
         "zero": parse_controller("zero", env_id),
         "ppo": parse_controller(f"ppo:{trained_on}", env_id),

@@ -41,14 +41,14 @@ REPORT_PLAN: dict[str, tuple[str, list[str]]] = {
             "sine_sweep_strong_linear",
         ],
     ),
-    LAUNCHER: ("zero,pid,lqi", ["step", "attitude", "random_steps", "linear_nozzle"]),
+    LAUNCHER: ("zero,pid,lqi,robust,ppo", ["step", "attitude", "random_steps", "linear_nozzle"]),
 }
 
 # env -> (controllers, scenarios) run over drawn plants (plant_spread, DEFAULT_SPREAD), PLANTS_PER_EPISODE
 # times the report's --episodes plants: 200 by default
 ROBUSTNESS_PLAN: dict[str, tuple[str, list[str]]] = {
     NOZZLE: ("zero,pid,lqi,robust,hysteresis,ppo,ppo:spread", ["random_steps", "sine_sweep"]),
-    LAUNCHER: ("zero,pid,lqi,robust", ["random_steps", "attitude"]),
+    LAUNCHER: ("zero,pid,lqi,robust,ppo", ["random_steps", "attitude"]),
 }
 PLANTS_PER_EPISODE = 10
 

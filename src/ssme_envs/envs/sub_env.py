@@ -13,6 +13,26 @@ from ssme_envs.envs.tracking_env import check_reset_options
 if TYPE_CHECKING:
     from ssme_envs.envs.vector import TrackingVectorEnv
 
+RESET_OPTIONS = {"reset_mask": "a numpy bool array of shape (num_envs,), at least one True"}
+
+
+def reset_mask(options: Any, num_envs: int, name: str) -> np.ndarray | None:
+    """The checked ``reset_mask`` of a vector env's reset options, or None (every sub-env); the
+    errors of ``SyncVectorEnv`` for a bad mask, and the scalar env's for other options."""
+    options = check_reset_options(options, RESET_OPTIONS, name)
+    if "reset_mask" not in options:
+        return None
+    mask = options["reset_mask"]
+    if not isinstance(mask, np.ndarray):
+        raise TypeError(f"options['reset_mask'] must be a numpy array, got {type(mask).__name__}")
+    if mask.shape != (num_envs,):
+        raise ValueError(f"options['reset_mask'] must have shape ({num_envs},), got {mask.shape}")
+    if mask.dtype != np.bool_:
+        raise TypeError(f"options['reset_mask'] must have dtype bool, got {mask.dtype}")
+    if not mask.any():
+        raise ValueError("options['reset_mask'] must have at least one True entry")
+    return mask
+
 
 class SubEnv:
     """Sub-env ``index`` of a :class:`TrackingVectorEnv`: a view of what one sub-env has alone.
@@ -121,4 +141,4 @@ class SubEnv:
         setattr(self, name, value)
 
 
-__all__ = ["SubEnv"]
+__all__ = ["RESET_OPTIONS", "SubEnv", "reset_mask"]

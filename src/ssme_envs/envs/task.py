@@ -170,6 +170,26 @@ def set_columns(state: Any, fresh: Any, envs: np.ndarray) -> None:
             block[..., envs] = new
 
 
+def adopt(table: np.ndarray, whole: np.ndarray) -> np.ndarray:
+    """``whole`` as the new ``table`` when it is a fresh array of the table's shape and dtype
+    (nothing else holds it), else ``table`` with ``whole`` copied in."""
+    fresh = whole.base is None and whole.flags.c_contiguous and whole.flags.writeable
+    if fresh and whole.shape == table.shape and whole.dtype == table.dtype:
+        return whole
+    table[...] = whole
+    return table
+
+
+def transpose_into(table: np.ndarray, out: np.ndarray, tile: int = 256) -> np.ndarray:
+    """A C-contiguous transpose copied tile by tile into ``out``: numpy's one-pass copy of a
+    transposed view strides through memory, several times slower on tens of MB."""
+    rows, cols = table.shape
+    for i in range(0, rows, tile):
+        for j in range(0, cols, tile):
+            out[j : j + tile, i : i + tile] = table[i : i + tile, j : j + tile].T
+    return out
+
+
 def check_number(name: str, value: Any, low: float, high: float, low_open: bool = False) -> float:
     """``value`` as a float, or ValueError unless a finite number within [low, high] (or (low, high])."""
     ok = isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
@@ -189,7 +209,9 @@ __all__ = [
     "Observation",
     "Schedule",
     "TrackingTask",
+    "adopt",
     "check_number",
     "next_stop",
     "set_columns",
+    "transpose_into",
 ]

@@ -28,11 +28,11 @@ from ssme_envs.envs.engine_task import EngineTask
 from ssme_envs.envs.engine_throttle import ThrottleTask
 from ssme_envs.envs.launcher_pitch import LauncherTask
 from ssme_envs.envs.nozzle_task import NozzleTask
-from ssme_envs.envs.sub_env import SubEnv
-from ssme_envs.envs.task import CLIP_UFUNC, GATHER, SYNCED, next_stop, set_columns
-from ssme_envs.envs.tracking_env import EpisodeOverError, check_reset_options
+from ssme_envs.envs.sub_env import SubEnv, reset_mask
+from ssme_envs.envs.task import CLIP_UFUNC, GATHER, SYNCED, adopt, next_stop, set_columns, transpose_into
+from ssme_envs.envs.tracking_env import EpisodeOverError
 
-RESET_OPTIONS = {"reset_mask": "a numpy bool array of shape (num_envs,), at least one True"}
+_FLOATS = (np.dtype(np.float32), np.dtype(np.float64))  # action dtypes clipped without a copy
 # what ``gymnasium.make_vec`` adds to a vector env's spec kwargs beside the scalar env's own
 VECTOR_KWARGS = ("num_envs", "vectorization_mode", "vector_kwargs", "wrappers", "autoreset_mode")
 
@@ -112,6 +112,8 @@ class TrackingVectorEnv(VectorEnv):
         )  # bounds of the (columns, N) table
         # a task that scales float32 unit noise into float64 itself is handed it as drawn
         self._noise_as_drawn = getattr(self.task, "scales_float32_noise", False)
+        # whether the task ends episodes whose step went non-finite (None: it passes them on)
+        self._ends_nonfinite = self.task.nonfinite_reward(np.zeros(1, dtype=np.int64)) is not None
         n, length, channels = num_envs, self.task.horizon + 1, self.task.n_channels
         self._rngs: list[np.random.Generator] = []
         self._seeds: list[int] = []  # np_random_seed of each sub-env (-1: generator set directly)
@@ -210,15 +212,15 @@ class TrackingVectorEnv(VectorEnv):
         if every:  # every episode at once (a reset of all, synced episodes): the whole of them in
             # one go, from a tiled transpose, as one pass costs less than several blocks'
             stop = self.task.horizon + 1
-            uniforms = _transpose(self._draws, self._uniforms)
+            uniforms = transpose_into(self._draws, self._uniforms)
         else:
             stop = next_stop(start, self.task.horizon + 1)
             uniforms = np.take(self._draws, envs, axis=0).T
         refs, noise = self.task.episodes(uniforms, start, stop)
         if every:  # whole tables: adopted when fresh (a copy of tens of MB spared), else sliced in
-            self._noise = _adopt(self._noise, noise)
+            self._noise = adopt(self._noise, noise)
             if self._refs is not None:
-                self._refs = _adopt(self._refs, refs)
+                self._refs = adopt(self._refs, refs)
         else:
             self._noise[:, start:stop, envs] = noise
             if self._refs is not None:
@@ -232,7 +234,7 @@ class TrackingVectorEnv(VectorEnv):
     ) -> tuple[np.ndarray, dict[str, Any]]:
         """Start new episodes in every sub-env, or only in those of ``options["reset_mask"]``
         (see the class docs); the observations of every sub-env and ``{}``."""
-        mask = self._reset_mask(options)
+        mask = reset_mask(options, self.num_envs, type(self).__name__)
         if seed is None:
             seed = [None] * self.num_envs
         elif isinstance(seed, int):
@@ -249,28 +251,13 @@ class TrackingVectorEnv(VectorEnv):
         self._started = not self._unstarted.any()
         return self._obs.copy(), {}
 
-    def _reset_mask(self, options: Any) -> np.ndarray | None:
-        """The checked ``reset_mask`` of the reset options, or None (every sub-env); the errors
-        of ``SyncVectorEnv`` for a bad mask, and the scalar env's for other options."""
-        options = check_reset_options(options, RESET_OPTIONS, type(self).__name__)
-        if "reset_mask" not in options:
-            return None
-        mask = options["reset_mask"]
-        if not isinstance(mask, np.ndarray):
-            raise TypeError(f"options['reset_mask'] must be a numpy array, got {type(mask).__name__}")
-        if mask.shape != (self.num_envs,):
-            raise ValueError(f"options['reset_mask'] must have shape ({self.num_envs},), got {mask.shape}")
-        if mask.dtype != np.bool_:
-            raise TypeError(f"options['reset_mask'] must have dtype bool, got {mask.dtype}")
-        if not mask.any():
-            raise ValueError("options['reset_mask'] must have at least one True entry")
-        return mask
-
     def step(
         self, actions: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """One step of every sub-env; (observations, rewards, terminated, truncated, infos)."""
-        acts = np.asarray(actions, dtype=np.float64)
+        acts = actions  # float32 or float64 as given: cast once, into the clipped rows below
+        if not isinstance(acts, np.ndarray) or acts.dtype not in _FLOATS:
+            acts = np.asarray(actions, dtype=np.float64)
         shape = (self.num_envs, self.task.n_actions)
         if acts.shape != shape:
             raise ValueError(f"actions must have shape {shape}, got {acts.shape}")
@@ -293,11 +280,13 @@ class TrackingVectorEnv(VectorEnv):
                     f"action of env {bad[0, 0]} must be finite, got {acts[bad[0, 0]].tolist()} (NaN or inf)"
                 )
         clipped = np.empty(shape[::-1])  # state-major and contiguous, as the core wants
-        CLIP_UFUNC(acts.T, -1.0, 1.0, out=clipped)
+        clipped[...] = acts.T  # the exact float64 values, clipped as such
+        CLIP_UFUNC(clipped, -1.0, 1.0, out=clipped)
         task = self.task
         t = self._t
         t += 1
-        np.minimum(t, task.horizon, out=t)  # an env past its end is restarted below
+        if self._t_bound >= task.horizon:  # an env past its end (restarted below) stays at it
+            np.minimum(t, task.horizon, out=t)
         self._t_bound = min(self._t_bound + 1, task.horizon)
         if self._t_bound >= self._ready_min and (t >= self._ready).any():
             self._extend(t)
@@ -318,14 +307,23 @@ class TrackingVectorEnv(VectorEnv):
         )
         # the observation values as rows of a float32 table, handed out transposed (N, columns)
         table = np.empty((len(values), self.num_envs), dtype=np.float32)
-        for row, value in zip(table, values, strict=True):
-            row[...] = value
+        if isinstance(values, np.ndarray):  # a task's (columns, N) table: one cast
+            table[...] = values
+        else:
+            for row, value in zip(table, values, strict=True):
+                row[...] = value
         # into the observation bounds, as the scalar envs do: one pass over the table
         CLIP_UFUNC(table, self._low_col, self._high_col, out=table)
         obs = table.T
-        truncated = t >= self._limit
-        # one reduction; the sub-envs whose step went NaN or infinite only on failure
-        step_infos = {} if math.isfinite(reward.sum()) else self._end_nonfinite(obs, reward, terminated, t)
+        # no t reaches the limit while their bound is below it: a fresh all-False row then
+        truncated = t >= self._limit if self._t_bound >= self._limit else np.zeros(self.num_envs, bool)
+        # one reduction; the sub-envs whose step went NaN or infinite only on failure (tasks
+        # that pass such values on, the engines', skip it)
+        step_infos = (
+            {}
+            if not self._ends_nonfinite or math.isfinite(reward.sum())
+            else self._end_nonfinite(obs, reward, terminated, t)
+        )
         infos: dict[str, Any] = {}
         if mode == AutoresetMode.NEXT_STEP:
             if self._autoreset.any():
@@ -379,26 +377,6 @@ class TrackingVectorEnv(VectorEnv):
         terminated[rows] = True
         obs[rows] = np.nan_to_num(obs[rows], nan=0.0)
         return {"nonfinite": bad.copy(), "_nonfinite": bad}
-
-
-def _adopt(table: np.ndarray, whole: np.ndarray) -> np.ndarray:
-    """``whole`` as the new ``table`` when it is a fresh array of the table's shape and dtype
-    (nothing else holds it), else ``table`` with ``whole`` copied in."""
-    fresh = whole.base is None and whole.flags.c_contiguous and whole.flags.writeable
-    if fresh and whole.shape == table.shape and whole.dtype == table.dtype:
-        return whole
-    table[...] = whole
-    return table
-
-
-def _transpose(table: np.ndarray, out: np.ndarray, tile: int = 256) -> np.ndarray:
-    """A C-contiguous transpose copied tile by tile into ``out``: numpy's one-pass copy of a
-    transposed view strides through memory, several times slower on tens of MB."""
-    rows, cols = table.shape
-    for i in range(0, rows, tile):
-        for j in range(0, cols, tile):
-            out[j : j + tile, i : i + tile] = table[i : i + tile, j : j + tile].T
-    return out
 
 
 class EngineTrackingVectorEnv(TrackingVectorEnv):
