@@ -72,7 +72,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.interpolate import CubicHermiteSpline, CubicSpline
 
 from ssme_envs.models.engine import (
     POWER_LEVELS,
@@ -174,6 +173,8 @@ class NonlinearEngine:
         self.C = first.structure.output_matrix()
         self.layout = _Layout(n, p, m)
         self._cols = self.layout.slices()
+        from scipy.interpolate import CubicSpline  # here: importing scipy.interpolate costs 0.25 s
+
         self._spline = CubicSpline(
             self.powers,
             np.stack([np.concatenate([mo.K.ravel(), mo.B.ravel(), mo.lam]) for mo in models]),
@@ -216,6 +217,8 @@ class NonlinearEngine:
         steps = half[:, None] * np.einsum("g,sgc->sc", weights, inner)
         trim = np.vstack([np.zeros(steps.shape[1]), np.cumsum(steps, axis=0)])
         trim -= trim[np.flatnonzero(grid == 100.0)[0]]  # x_eq(100) = 0, v_eq(100) = 0
+        from scipy.interpolate import CubicHermiteSpline
+
         spline = CubicHermiteSpline(grid, np.hstack([params, trim]), np.hstack([dparams, trim_slopes]))
         # the piecewise cubic of the table, read by table() and by the engine envs' step: on
         # segment s (grid[s] <= rho < grid[s + 1]), column j is ((c0 t + c1) t + c2) t + c3 with
