@@ -4,13 +4,14 @@ Steps per second of each ssme-envs environment through ``gymnasium.make`` (singl
 its native vector env at several sizes, with Pendulum-v1 (single) and CartPole-v1's native vector
 env measured alongside. Machines are shared and noisy, so the two are timed in alternating
 rounds and each rate is the best round's (as ``timeit`` does); the ratios are what to compare.
-A round is one whole episode of the measured env (its registered step limit), so the vector
-rates include the resets of every episode. Each env, the references included, is stepped with
+A round is one whole episode of the measured env (its registered step limit) from its reset, so
+the vector rates include the reset of every episode. Each env, the references included, is stepped with
 the zero action (our episodes then run to their time limit: the rates time steps) and with
 uniform random actions (episodes end early and often: the rates include their resets).
 
 Each native vector row also gives its floor: the plant's arithmetic alone (the plant core of
-``models`` on N envs, without references, noise, rewards or observations), timed on its own.
+``models`` on N envs, without references, noise, rewards or observations), timed in the same
+alternating rounds (an episode's steps, no reset).
 """
 
 from __future__ import annotations
@@ -65,6 +66,7 @@ def _vector_stepper(
 
     def run(steps: int) -> float:
         start = time.perf_counter()
+        env.reset()  # a round is an episode from its reset (not reseeded, as an autoreset)
         for k in range(steps):
             env.step(table[k % len(table)])
         return time.perf_counter() - start
@@ -72,21 +74,28 @@ def _vector_stepper(
     return run, env.close
 
 
-def _race(ours: tuple, reference: tuple, steps: int, rounds: int) -> tuple[float, float]:
-    """Best seconds per step of ours and of the reference over alternating rounds."""
-    times = np.empty((rounds, 2))
+def _race(ours: tuple, reference: tuple, steps: int, rounds: int, *others: tuple) -> list[float]:
+    """Best seconds per step of ours, the reference and any ``others`` (steppers: run, close)
+    over alternating rounds."""
+    contestants = (ours, reference, *others)
+    times = np.empty((rounds, len(contestants)))
     for r in range(rounds):
-        times[r] = reference[0](steps), ours[0](steps)
-    ours[1]()
-    reference[1]()
-    best = times.min(axis=0) / steps
-    return best[1], best[0]
+        times[r] = [run(steps) for run, _ in contestants]
+    for _, close in contestants:
+        close()
+    return (times.min(axis=0) / steps).tolist()
 
 
 def plant_floor(env_id: str, num_envs: int, steps: int = 50, rounds: int = 5) -> float:
     """Best seconds per step of the env's plant arithmetic alone on ``num_envs`` envs: the
     plant core the task steps (engine valves and dynamics; the nozzle's RK4 substeps; the
     launcher's servo samples of RK4 and body), at the zero command."""
+    run, _ = _floor_stepper(env_id, num_envs)
+    return min(run(steps) for _ in range(rounds)) / steps
+
+
+def _floor_stepper(env_id: str, num_envs: int) -> tuple[Callable[[int], float], Callable[[], None]]:
+    """A stepper (run, close) of the plant arithmetic of :func:`plant_floor`."""
     from ssme_envs.envs.engine_task import EngineTask
     from ssme_envs.envs.launcher_pitch import LauncherTask
     from ssme_envs.envs.nozzle_task import integrate
@@ -119,13 +128,13 @@ def plant_floor(env_id: str, num_envs: int, steps: int = 50, rounds: int = 5) ->
         def step() -> None:
             integrate(joint, zero, h, task.substeps, task.rk4_params, SYNCED)
 
-    best = math.inf
-    for _ in range(rounds):
+    def run(steps: int) -> float:
         start = time.perf_counter()
         for _ in range(steps):
             step()
-        best = min(best, (time.perf_counter() - start) / steps)
-    return best
+        return time.perf_counter() - start
+
+    return run, lambda: None
 
 
 def run_benchmark(
@@ -146,7 +155,6 @@ def run_benchmark(
     rows: list[dict[str, float | str]] = []
     for env_id in env_ids:
         episode = gym.spec(env_id).max_episode_steps or 1000
-        floors = {}
         for kind in actions:
             say(f"{env_id} (single, {kind} actions) beside Pendulum-v1 ...")
             ours, ref = _race(
@@ -158,13 +166,13 @@ def run_benchmark(
             rows.append(_row(env_id, "single", kind, 1, 1.0 / ours, "Pendulum-v1", 1.0 / ref, math.nan))
             for n in sizes:
                 say(f"{env_id} native vector, N = {n}, {kind} actions, beside CartPole-v1's ...")
-                if n not in floors:
-                    floors[n] = plant_floor(env_id, n)
-                ours, ref = _race(
-                    _vector_stepper(env_id, n, kind), _vector_stepper("CartPole-v1", n, kind), episode, rounds
+                reference = _vector_stepper("CartPole-v1", n, kind)
+                floor_stepper = _floor_stepper(env_id, n)
+                ours, ref, floor = _race(
+                    _vector_stepper(env_id, n, kind), reference, episode, rounds, floor_stepper
                 )
                 rows.append(
-                    _row(env_id, "vector", kind, n, n / ours, "CartPole-v1 vector", n / ref, n / floors[n])
+                    _row(env_id, "vector", kind, n, n / ours, "CartPole-v1 vector", n / ref, n / floor)
                 )
     return rows
 
