@@ -9,7 +9,6 @@ from typing import Any, ClassVar, NamedTuple
 
 import numpy as np
 
-from ssme_envs.envs.engine_batch import step_rows
 from ssme_envs.envs.engine_nonlinear_plant import NonlinearPlantCore, nonlinear_engine_of, nonlinear_task
 from ssme_envs.envs.references import (
     Fault,
@@ -134,8 +133,11 @@ class EngineTask:
     # the float core's operands in one tuple (one attribute read a step): pair_rows of K and B,
     # lambda - 1 of each valve, half the backlash, the stiction band
     rows: tuple = field(init=False, repr=False)
-    # noise_std as floats (both carriers scale the float64 unit draws by them)
-    noise_scale: tuple[float, float] = field(init=False, repr=False)
+    noise_scale: tuple[float, float] = field(init=False, repr=False)  # noise_std as floats
+    # noise_std as float64 arrays of one element: the batched step scales the float32 unit draws
+    # by them straight into float64 (the products of the exact upcast, without an astype pass;
+    # arrays, not numpy scalars, which numpy 1's value-based casting would leave float32)
+    noise_scale_arrays: tuple = field(init=False, repr=False)
     offsets: Schedule | None = field(init=False, repr=False)  # offset_table for both carriers
     fault_step: int = field(init=False)  # the step after which the fault acts (-1: none)
     # largest reward loss of one step inside the envelope (errors and valve rates at their bounds)
@@ -145,7 +147,7 @@ class EngineTask:
     action_names: ClassVar[tuple[str, ...]] = ("OPOV", "FPOV")
     n_actions: ClassVar[int] = 2
     n_channels: ClassVar[int] = 2  # Pc, MR
-    # the batched step takes the unit noise float32, as drawn, and upcasts it itself
+    # the batched step takes the unit noise float32, as drawn (see noise_scale_arrays)
     scales_float32_noise: ClassVar[bool] = True
 
     @classmethod
@@ -235,6 +237,7 @@ class EngineTask:
             ),
         )
         object.__setattr__(self, "noise_scale", tuple(self.noise_std.tolist()))
+        object.__setattr__(self, "noise_scale_arrays", tuple(np.full(1, s) for s in self.noise_scale))
         offsets = None if self.offset_table is None else Schedule.of(self.offset_table)
         object.__setattr__(self, "offsets", offsets)
         object.__setattr__(
@@ -307,11 +310,11 @@ class EngineTask:
     plant_draw_size: ClassVar[int] = 0  # the engine's plant is the same in every episode
 
     def initial_state(self, n: int | None = None, plants: np.ndarray | None = None) -> EngineState:
-        """The state at reset: floats (``n`` None) or arrays of ``n`` envs (``plants``: unused),
-        the error integrals and previous actions as (2, n) blocks."""
+        """The state at reset: floats (``n`` None) or arrays of ``n`` envs (``plants``: unused)."""
         if n is None:
             return EngineState(self.initial_plant(n), (0.0, 0.0), (0.0, 0.0), 0.0)
-        return EngineState(self.initial_plant(n), np.zeros((2, n)), np.zeros((2, n)), np.zeros(n))
+        pair = lambda: (np.zeros(n), np.zeros(n))  # noqa: E731  (fresh arrays: written by column)
+        return EngineState(self.initial_plant(n), pair(), pair(), np.zeros(n))
 
     def plant_step(
         self, plant: EnginePlant, c0: Value, c1: Value, t: Any, nominal: Any, ops: Carrier
@@ -345,18 +348,22 @@ class EngineTask:
     ) -> tuple[EngineState, tuple, Value, Any]:  # fmt: skip
         """One step, as :class:`~ssme_envs.envs.task.TrackingTask` says: actions in [-1, 1]
         (OPOV, FPOV), the sensor noise in unit draws. Returns (state, the 10 observation values,
-        reward, terminated). On arrays: :func:`~ssme_envs.envs.engine_batch.step_rows`, the same
-        operations on both channels at once, the values as one (10, N) table."""
-        if ops.batched:
-            return step_rows(self, state, action, t, ref, noise, ops)
+        reward, terminated)."""
         plant, integral, prev, held = state
         a0, a1 = action[0], action[1]
         nominal = None
-        cmd = [a0 * self.action_scale, a1 * self.action_scale]
-        if self.offsets is not None:
-            nominal = ops.at(self.offsets, t)
-            cmd = [nominal[0] + cmd[0], nominal[1] + cmd[1]]
-        s0, s1 = self.noise_scale
+        if ops.batched:  # action is (2, N): one pass makes the commands of both valves
+            cmd = action * self.action_scale
+            if self.offsets is not None:  # the throttle's nominal valve schedule
+                nominal = ops.at(self.offsets, t)
+                cmd += nominal
+            s0, s1 = self.noise_scale_arrays
+        else:
+            cmd = [a0 * self.action_scale, a1 * self.action_scale]
+            if self.offsets is not None:
+                nominal = ops.at(self.offsets, t)
+                cmd = [nominal[0] + cmd[0], nominal[1] + cmd[1]]
+            s0, s1 = self.noise_scale
         fault = self.fault
         if fault is not None and fault.kind != "sensor_bias":
             i, active = fault.index, t > self.fault_step

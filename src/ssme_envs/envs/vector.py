@@ -307,11 +307,8 @@ class TrackingVectorEnv(VectorEnv):
         )
         # the observation values as rows of a float32 table, handed out transposed (N, columns)
         table = np.empty((len(values), self.num_envs), dtype=np.float32)
-        if isinstance(values, np.ndarray):  # a task's (columns, N) table: one cast
-            table[...] = values
-        else:
-            for row, value in zip(table, values, strict=True):
-                row[...] = value
+        for row, value in zip(table, values, strict=True):
+            row[...] = value
         # into the observation bounds, as the scalar envs do: one pass over the table
         CLIP_UFUNC(table, self._low_col, self._high_col, out=table)
         obs = table.T
