@@ -202,3 +202,12 @@ def test_init_policy_starts_from_a_trained_run(tmp_path):
     wider = tmp_path / "wider.toml"
     wider.write_text(second.read_text().replace("[8, 8]", "[8, 16]"))
     assert main(["train", "--config", str(wider), "--steps", "256", "--out", str(tmp_path / "c")]) == 2
+
+
+def test_a_refused_init_policy_leaves_no_run_directory(tmp_path, capsys):
+    config = tmp_path / "bad.toml"
+    config.write_text(f'env = "{TRACKING}"\nalgo = "ppo"\ninit_policy = "{tmp_path / "nowhere"}"\n')
+    assert main(["train", "--config", str(config), "--steps", "64", "--out", str(tmp_path / "run")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error:") and "no such policy directory" in err[0]
+    assert not (tmp_path / "run").exists()

@@ -78,8 +78,14 @@ def train_command(args: argparse.Namespace) -> int:
     config = check_config(config, str(args.config or "options"))
     check_env_id(config["env"])  # before the output directory is made
     check_training(config)
+    created = not args.out.exists()
     _make_dir(args.out)
-    summary = train(config, args.out)
+    try:
+        summary = train(config, args.out)
+    except BaseException:
+        if created and not any(args.out.iterdir()):  # refused before writing: leave nothing behind
+            args.out.rmdir()
+        raise
     kept = summary["kept"]
     which = "final policy" if kept["model"] == "final" else "best evaluation's policy"
     print(

@@ -58,11 +58,11 @@ def robustness_folder(env_id: str) -> str:
     return env_id.split("/")[-1] + "-robustness"
 
 
-def _embedded(path: Path, folder: str) -> list[str]:
-    """A sub-report's lines, headings one level down and figure paths into its folder."""
+def _embedded(path: Path, folder: str, levels: int = 1) -> list[str]:
+    """A sub-report's lines, headings ``levels`` down and figure paths into its folder."""
     text = path.read_text()
     text = re.sub(r"!\[([^\]]*)\]\((?!http)([^)]+)\)", lambda m: f"![{m[1]}]({folder}/{m[2]})", text)
-    return [("#" + line if line.startswith("#") else line) for line in text.splitlines()]
+    return [("#" * levels + line if line.startswith("#") else line) for line in text.splitlines()]
 
 
 def _cost(results: EvaluationResult, scenario: str, controller: str) -> float:
@@ -246,8 +246,7 @@ def write_main_report(
         ]
         for env_id in robust:
             folder = robustness_folder(env_id)
-            embedded = _embedded(out / folder / "robustness.md", folder)  # "## Robustness on ..."
-            lines += [("#" + line if line.startswith("#") else line) for line in embedded] + [""]
+            lines += [*_embedded(out / folder / "robustness.md", folder, levels=2), ""]  # "### Robustness on"
     lines += ["## Identification", ""]
     for folder in ("engine", "nozzle"):
         if (out / folder / "report.md").exists():

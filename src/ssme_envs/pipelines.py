@@ -65,20 +65,19 @@ def _evaluate_into(
     result = evaluate(env_id, factories, scenarios, episodes, seed, progress=progress, options=options)
     write_evaluation(result, work, command)
     if spread is not None:
-        _robustness_into(work, result, factories, seed, spread, command, progress)
+        _robustness_into(work, result, factories, episodes, seed, spread, command, progress)
     return result
 
 
 def _robustness_into(
-    work: Path, drawn: EvaluationResult, factories: Mapping[str, Callable], seed: int, spread: float | str,
-    command: str, progress: Progress,
+    work: Path, drawn: EvaluationResult, factories: Mapping[str, Callable], episodes: int, seed: int,
+    spread: float | str, command: str, progress: Progress,
 ) -> None:  # fmt: skip
     """robustness.md and .json in ``work`` for the drawn-plant evaluation ``drawn``, the nominal
     plant's mean cost from a second run on the same seeds."""
     from ssme_envs.evaluation import evaluate
 
     progress("the same episodes on the nominal plant ...")
-    episodes = next(iter(drawn.rollouts.values())).alive.shape[1]
     nominal = evaluate(drawn.env_id, factories, list(drawn), episodes, seed, progress=progress)
     write_robustness(work, drawn, nominal, spread, command)
 

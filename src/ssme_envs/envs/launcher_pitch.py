@@ -20,7 +20,7 @@ from ssme_envs.envs.nozzle_task import (
     integrate,
     resolve_nozzle,
 )
-from ssme_envs.envs.plant_spread import resolve_spread
+from ssme_envs.envs.plant_spread import covered_joints, resolve_spread
 from ssme_envs.envs.references import Fault
 from ssme_envs.envs.task import SYNCED, Carrier, Observation, Value, check_number
 from ssme_envs.envs.tracking_env import TrackingEnv
@@ -173,7 +173,6 @@ class LauncherTask:
         object.__setattr__(self, "servo", nozzle_servo_gains(self.plant))
         h = self.dt / self.substeps
         object.__setattr__(self, "body", body_transition(self.instability, self.effectiveness, h))
-        spread = self.nozzle.spread
         rk4_substeps = max(
             integration_substeps(
                 joint,
@@ -184,7 +183,7 @@ class LauncherTask:
                 max_substeps=MAX_SUBSTEPS // self.substeps,
                 sample="servo sample",
             )
-            for joint in ([self.plant] if spread is None else spread.corners())
+            for joint in covered_joints(self.plant, self.nozzle.spread)
         )  # the worst joint the spread can draw sets the count
         object.__setattr__(self, "rk4_substeps", rk4_substeps)
 

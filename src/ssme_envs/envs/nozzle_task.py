@@ -11,7 +11,7 @@ from typing import Any, ClassVar, NamedTuple
 import gymnasium as gym
 import numpy as np
 
-from ssme_envs.envs.plant_spread import PlantSpread, resolve_spread
+from ssme_envs.envs.plant_spread import PlantSpread, covered_joints, resolve_spread
 from ssme_envs.envs.references import Fault, check_reference, normal_rows, reference_signals, uniforms_needed
 from ssme_envs.envs.task import SYNCED, Carrier, Observation, Value, check_number
 from ssme_envs.models.nozzle import (
@@ -190,7 +190,7 @@ class NozzleTask:
     ) -> NozzleTask:
         params, design = resolve_nozzle(plant)
         spread = resolve_spread(plant_spread, params, plant, uncertainty_scale)
-        joints = [params] if spread is None else spread.corners()
+        joints = covered_joints(params, spread)
         episode = episode_options(
             reference, reference_amplitude_deg, 3.0, sensor_noise, fault, episode_seconds, NOZZLE_DT
         )

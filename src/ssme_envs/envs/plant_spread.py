@@ -171,6 +171,12 @@ class PlantSpread:
         return params
 
 
+def covered_joints(joint: NozzleParameters, spread: PlantSpread | None) -> list[NozzleParameters]:
+    """The joints an env's RK4 substeps must serve: ``joint`` alone, or every corner of the
+    spread around it (the nominal first)."""
+    return [joint] if spread is None else spread.corners()
+
+
 def _joint(values: np.ndarray) -> NozzleParameters:
     norm = dict(zip(NAMES, values.tolist(), strict=True))
     return NozzleParameters.from_normalized(**norm, A=1.0)
@@ -213,4 +219,4 @@ def _model_of(plant: Any) -> NozzleModel:
     )
 
 
-__all__ = ["NAMES", "TRUNCATION", "PlantSpread", "resolve_spread"]
+__all__ = ["NAMES", "TRUNCATION", "PlantSpread", "covered_joints", "resolve_spread"]
