@@ -65,14 +65,16 @@ def _robust(env: Any, design: str) -> Controller:
 def _shipped_ppo(env: Any, design: str) -> Controller:
     """The PPO policy shipped for the env, trained on its full truth (``design="truth"``) or, for
     EngineTracking, on the identified model (``"identified"``)."""
-    from agents.sb3 import PolicyController, shipped_policy
+    from agents.sb3 import load_trained, policy_controller, shipped_policy
 
-    return PolicyController(shipped_policy(env_id_of(env), design))
+    env_id = env_id_of(env)
+    return policy_controller(load_trained(shipped_policy(env_id, design)), env, env_id)
 
 
 # shipped policies trained on other than the identified model or the truth: ``ppo:spread``, trained
-# with the plant drawn per episode (plant_spread=0.2)
-POLICY_VARIANTS = ("spread",)
+# with the plant drawn per episode (plant_spread=0.2); ``ppo:residual``, a correction learned on top
+# of a classical design's action (agents.residual)
+POLICY_VARIANTS = ("spread", "residual")
 # name -> (factory(env, design), the env ids it serves, the design model when none is named)
 CONTROLLERS: dict[str, tuple[Callable[[Any, str], Controller], tuple[str, ...], str]] = {
     "zero": (ZeroAction, tuple(ENVS), "identified"),  # the baseline of every env
@@ -102,9 +104,10 @@ def parse_controller(spec: str, env_id: str, allow_pickle: bool = False) -> Call
     ----------
     spec : str
         ``name`` or ``name:design`` (design: identified, truth; for ``ppo`` the plant the shipped
-        policy was trained on, or ``spread``: NozzleTVC's policy trained on plants drawn per
-        episode), or ``algo:PATH`` (algo: ppo, sac, td3) for the run directory of
-        ``ssme-envs train`` (write ``ppo:./truth`` for a directory named like a design).
+        policy was trained on, ``spread``: NozzleTVC's policy trained on plants drawn per
+        episode, or ``residual``: the policy that corrects a classical design's action), or
+        ``algo:PATH`` (algo: ppo, sac, td3) for the run directory of ``ssme-envs train`` (write
+        ``ppo:./truth`` for a directory named like a design).
     env_id : str
         The env the controller is for.
     allow_pickle : bool
@@ -131,12 +134,12 @@ def parse_controller(spec: str, env_id: str, allow_pickle: bool = False) -> Call
 
 def _trained(algo: str, path: str, env_id: str, allow_pickle: bool) -> Callable[[Any], Controller]:
     """The factory of a trained policy, loaded (and checked) once, here."""
-    from agents.sb3 import PolicyController, load_trained
+    from agents.sb3 import load_trained, policy_controller
 
     loaded = load_trained(path, algo, allow_pickle)
     if loaded.env_id is not None and loaded.env_id != env_id:
         raise ValueError(f"{path}: the {algo} policy was trained on {loaded.env_id}, not {env_id}")
-    return lambda env: PolicyController(loaded)
+    return lambda env: policy_controller(loaded, env, env_id)
 
 
 def make_controller(spec: str, env: Any, env_id: str | None = None, allow_pickle: bool = False) -> Controller:

@@ -28,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from agents.residual import Residual, check_residual
 from ssme_envs.outputs import atomic_write
 
 FORMAT = "ssme-envs/policy"
@@ -50,7 +51,7 @@ _KWARGS = {
 # needed to train, not to act: left out of policy.json (a rebuilt policy takes the defaults)
 _TRAINING_ONLY = ("observation_space", "action_space", "lr_schedule", "optimizer_class", "optimizer_kwargs")
 _POLICY_KEYS = {"format", "version", "algo", "env", "policy", "policy_kwargs", "observation_space",
-                "action_space", "weights_sha256"}  # fmt: skip
+                "action_space", "weights_sha256", "residual"}  # fmt: skip
 _SPACE_KEYS = {"type", "shape", "dtype", "low", "high"}
 _NORMALIZATION_KEYS = {"mean", "var", "count", "clip", "epsilon"}
 
@@ -100,6 +101,7 @@ class LoadedPolicy:
     env_id: str | None
     normalization: Normalization | None
     source: Path
+    residual: Residual | None = None  # a residual policy's base controller and scale (agents.residual)
 
 
 def _load_json(path: Path, what: str) -> dict[str, Any]:
@@ -230,8 +232,11 @@ def _valid_net_arch(value: Any) -> bool:
     return layers(value)
 
 
-def save_policy(policy: Any, algo: str, env_id: str, directory: Path) -> None:
-    """Write ``policy.safetensors`` and ``policy.json`` for an SB3 MLP policy (``model.policy``)."""
+def save_policy(
+    policy: Any, algo: str, env_id: str, directory: Path, residual: Residual | None = None
+) -> None:
+    """Write ``policy.safetensors`` and ``policy.json`` for an SB3 MLP policy (``model.policy``),
+    with the base controller and scale of a residual policy (:mod:`agents.residual`)."""
     from safetensors.torch import save
 
     if policy.__class__ is not algorithm_class(algo).policy_aliases["MlpPolicy"]:
@@ -249,6 +254,8 @@ def save_policy(policy: Any, algo: str, env_id: str, directory: Path) -> None:
         "action_space": encode_space(policy.action_space),
         "weights_sha256": hashlib.sha256(raw).hexdigest(),
     }
+    if residual is not None:
+        meta["residual"] = residual._asdict()
     directory = Path(directory)
     write_atomic(directory / WEIGHTS, raw)
     write_atomic(directory / POLICY_JSON, json.dumps(meta, indent=1) + "\n")
@@ -270,11 +277,16 @@ def read_policy_json(directory: Path) -> dict[str, Any]:
         raise ValueError(f"{directory}: not a trained policy (missing {', '.join(missing)}){hint}")
     path = directory / POLICY_JSON
     meta = _load_json(path, "policy")
-    _check_keys(meta, _POLICY_KEYS, _POLICY_KEYS, str(path))
+    _check_keys(meta, _POLICY_KEYS, _POLICY_KEYS - {"residual"}, str(path))
     if meta["format"] != FORMAT or meta["version"] != VERSION:
         raise ValueError(f"{path}: not an {FORMAT} v{VERSION} file")
     if meta["algo"] not in ALGOS or meta["policy"] != "MlpPolicy" or not isinstance(meta["env"], str):
         raise ValueError(f"{path}: needs algo ({', '.join(ALGOS)}), policy MlpPolicy and an env id")
+    if "residual" in meta:
+        entry = meta["residual"]
+        if not isinstance(entry, dict) or set(entry) != set(Residual._fields):
+            raise ValueError(f"{path}: residual must be an object with {', '.join(Residual._fields)}")
+        meta["residual"] = check_residual(entry["base"], entry["scale"], meta["env"], f"{path}: residual")
     return meta
 
 
@@ -307,7 +319,7 @@ def load_policy(directory: Path) -> LoadedPolicy:
     except (AssertionError, TypeError, ValueError) as exc:
         raise ValueError(f"{where}: cannot build {policy_class.__name__} ({exc})") from None
     _load_state(policy, tensors, directory / WEIGHTS)
-    return LoadedPolicy(policy, meta["algo"], meta["env"], normalization, directory)
+    return LoadedPolicy(policy, meta["algo"], meta["env"], normalization, directory, meta.get("residual"))
 
 
 def _check_size(net_arch: list[int] | dict[str, list[int]], stored: int, where: str) -> None:

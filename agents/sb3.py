@@ -39,6 +39,7 @@ from agents.policy_files import (
 )
 from agents.policy_files import algorithm_class as _algorithm
 from agents.policy_zip import load_sb3_zip
+from agents.residual import Residual, ResidualController, base_controller, check_residual, residual_vec_env
 
 try:
     import tomllib
@@ -58,9 +59,12 @@ CONFIG_KEYS = {
     "hyperparameters": dict,
     "policy": dict,
     "init_policy": str,  # a policy directory whose weights and normalization start the training
+    "residual": str,  # a classical controller of the env the policy's action is added to (agents.residual)
+    "residual_scale": float,  # the residual's action scale, in (0, 2]
 }
 DEFAULTS = {"steps": 200_000, "seed": 0, "num_envs": 64, "eval_freq": 50_000, "eval_episodes": 20,
             "tensorboard": False, "env_options": {}, "hyperparameters": {}, "policy": {}}  # fmt: skip
+RESIDUAL_SCALE = 0.5  # the residual's default action scale
 # the shipped policies: trained on each env's full truth, and on EngineTracking's identified model
 SHIPPED = (
     "EngineTracking-v0",
@@ -78,6 +82,8 @@ def check_config(config: dict[str, Any], source: str = "config") -> dict[str, An
         if key not in CONFIG_KEYS:
             raise ValueError(f"{source}: unknown key {key!r}; known: {', '.join(CONFIG_KEYS)}")
         want = CONFIG_KEYS[key]
+        if want is float and isinstance(value, int) and not isinstance(value, bool):
+            value = float(value)
         if not isinstance(value, want) or (want is int and isinstance(value, bool)):
             raise ValueError(f"{source}: {key} must be {want.__name__}, got {type(value).__name__}")
     full = {**DEFAULTS, **config}
@@ -99,10 +105,20 @@ def check_config(config: dict[str, Any], source: str = "config") -> dict[str, An
             if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
                 raise ValueError(f"{source}: hyperparameters.{key} must be a number, got {value!r}")
     for key, value in full["policy"].items():
+        if key == "log_std_init":  # the initial exploration noise, log of its std
+            if isinstance(value, bool) or not isinstance(value, int | float) or not -5 <= value <= 2:
+                raise ValueError(f"{source}: policy.log_std_init must be a number in [-5, 2], got {value!r}")
+            continue
         if key != "net_arch":
-            raise ValueError(f"{source}: unknown key policy.{key}; known: net_arch")
+            raise ValueError(f"{source}: unknown key policy.{key}; known: net_arch, log_std_init")
         if not (isinstance(value, list) and value and all(isinstance(v, int) and v > 0 for v in value)):
             raise ValueError(f"{source}: policy.net_arch must be a list of positive integers, got {value!r}")
+    if "residual" in full:
+        scale = full.get("residual_scale", RESIDUAL_SCALE)
+        checked = check_residual(full["residual"], scale, full["env"], f"{source}: residual")
+        full["residual_scale"] = checked.scale
+    elif "residual_scale" in full:
+        raise ValueError(f"{source}: residual_scale without residual (the base controller)")
     return full
 
 
@@ -188,8 +204,10 @@ def plan_steps(config: dict[str, Any]) -> tuple[int, dict[str, Any], str | None]
 def train(config: dict[str, Any], out: Path, progress: bool = True) -> dict[str, Any]:
     """Train on the env's native vector env through the SB3 adapter, observations (and rewards)
     normalized by VecNormalize, and keep the policy of the best evaluation (the final policy
-    is evaluated too). Writes ``policy.json``, ``policy.safetensors``, ``normalization.json``,
-    ``config.toml`` and ``training.json`` into ``out`` (no pickle, no zip).
+    is evaluated too; every evaluation runs the same ``eval_episodes`` episodes). Writes
+    ``policy.json``, ``policy.safetensors``, ``normalization.json``, ``config.toml`` and
+    ``training.json`` into ``out`` (no pickle, no zip). With ``residual`` in the config the policy
+    learns a correction to that classical controller's action (:mod:`agents.residual`).
 
     Parameters
     ----------
@@ -222,18 +240,24 @@ def train(config: dict[str, Any], out: Path, progress: bool = True) -> dict[str,
     out.mkdir(parents=True, exist_ok=True)
     algo, env_id, seed, n = config["algo"], config["env"], config["seed"], config["num_envs"]
     options = config["env_options"]
+    residual = Residual(config["residual"], config["residual_scale"]) if "residual" in config else None
+
+    def vec_env(num_envs: int, env_seed: int) -> Any:
+        sb3_env = make_sb3_vec_env(env_id, num_envs, env_seed, **options)
+        if residual is not None:  # each vector env with its own base controller
+            import gymnasium as gym
+
+            base = base_controller(residual, gym.make(env_id, **options), env_id)
+            sb3_env = residual_vec_env(sb3_env, base, residual.scale)
+        return VecMonitor(sb3_env)
+
     try:
-        venv = VecNormalize(
-            VecMonitor(make_sb3_vec_env(env_id, n, seed, **options)), gamma=hyper.get("gamma", 0.99)
-        )
-        evaluation = VecNormalize(
-            VecMonitor(make_sb3_vec_env(env_id, config["eval_episodes"], seed + 100_000, **options)),
-            training=False,
-            norm_reward=False,
-        )
+        venv = VecNormalize(vec_env(n, seed), gamma=hyper.get("gamma", 0.99))
+        evaluation = VecNormalize(vec_env(config["eval_episodes"], seed + 100_000), training=False,
+                                  norm_reward=False)  # fmt: skip
     except TypeError as exc:  # an option the env does not take
         raise ValueError(f"env_options: {exc}") from None
-    policy_kwargs = {"net_arch": config["policy"]["net_arch"]} if config["policy"] else None
+    policy_kwargs = dict(config["policy"]) or None
     try:
         model = _algorithm(algo)(
             "MlpPolicy", venv, seed=seed, device="cpu", verbose=0, policy_kwargs=policy_kwargs,
@@ -248,6 +272,7 @@ def train(config: dict[str, Any], out: Path, progress: bool = True) -> dict[str,
 
     def evaluate_now() -> None:
         sync_envs_normalization(venv, evaluation)
+        evaluation.seed(seed + 100_000)  # the same episodes at every evaluation: returns compare
         mean, _ = evaluate_policy(model, evaluation, n_eval_episodes=config["eval_episodes"], warn=False)
         entry: dict[str, Any] = {"steps": int(model.num_timesteps), "return": float(mean)}
         history.append(entry)
@@ -255,7 +280,7 @@ def train(config: dict[str, Any], out: Path, progress: bool = True) -> dict[str,
         if mean > best["return"] or "steps" not in best:  # keep it, with the statistics it saw
             entry["best"] = True
             best.update(steps=entry["steps"], **{"return": entry["return"]})
-            save_policy(model.policy, algo, env_id, out)
+            save_policy(model.policy, algo, env_id, out, residual)
             save_normalization(venv, out / NORMALIZATION)
         if progress:
             print(f"evaluation at {model.num_timesteps:,} steps: return {mean:.3f}", file=sys.stderr)
@@ -350,6 +375,16 @@ def load_trained(path: str | Path, algo: str | None = None, allow_pickle: bool =
     return loaded
 
 
+def policy_controller(loaded: LoadedPolicy, env: Any, env_id: str) -> BatchController:
+    """A loaded policy as the controller of ``env``: a :class:`PolicyController`, or for a residual
+    policy the :class:`~agents.residual.ResidualController` over its base designed for ``env``."""
+    controller = PolicyController(loaded)
+    if loaded.residual is None:
+        return controller
+    base = base_controller(loaded.residual, env, env_id)
+    return ResidualController(controller, base, loaded.residual.scale)
+
+
 class PolicyController(BatchController):
     """A trained SB3 policy as a controller: observations normalized with the run's statistics,
     deterministic actions.
@@ -405,6 +440,7 @@ __all__ = [
     "load_config",
     "load_trained",
     "plan_steps",
+    "policy_controller",
     "shipped_policy",
     "to_vec_normalize",
     "train",

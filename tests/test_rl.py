@@ -211,3 +211,27 @@ def test_a_refused_init_policy_leaves_no_run_directory(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("error:") and "no such policy directory" in err[0]
     assert not (tmp_path / "run").exists()
+
+
+def test_every_evaluation_runs_the_same_episodes(tmp_path, monkeypatch):
+    """The kept policy is the best of evaluations on one set of episodes: each evaluation starts
+    from the same first observations (the evaluation env is reseeded), not from the stream's next
+    episodes, which would make the best evaluation the luckiest draw."""
+    import stable_baselines3.common.evaluation as sb3_evaluation
+
+    firsts = []
+
+    def first_observations(model, env, n_eval_episodes, warn):
+        env.reset()
+        firsts.append(env.get_original_obs().copy())
+        return 0.0, 0.0
+
+    monkeypatch.setattr(sb3_evaluation, "evaluate_policy", first_observations)
+    config = tmp_path / "c.toml"
+    config.write_text(
+        f'env = "{NOZZLE}"\nalgo = "ppo"\nnum_envs = 4\neval_freq = 256\neval_episodes = 3\n'
+        "[hyperparameters]\nn_steps = 64\nbatch_size = 64\n[policy]\nnet_arch = [8, 8]\n"
+    )
+    assert main(["train", "--config", str(config), "--steps", "768", "--out", str(tmp_path / "run")]) == 0
+    assert len(firsts) == 3 and all(np.array_equal(f, firsts[0]) for f in firsts)
+    assert len({tuple(row) for row in firsts[0].round(6)}) == 3  # three different episodes

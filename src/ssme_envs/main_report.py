@@ -15,6 +15,7 @@ from ssme_envs.report_costs import (
     WRITTEN_CAUSES,
     cost_over_zero_tables,
     is_classical,
+    learned_over_classical_tables,
     measured_causes,
     over_zero,
     unexplained,
@@ -214,6 +215,8 @@ def write_main_report(
         f"and evaluated on the truth, {episodes} episodes per scenario, the same seeds for every controller.",
         "",
         *cost_over_zero_tables(evaluations),
+        *learned_over_classical_tables(evaluations),
+        "",
     ]
     if TRACKING in evaluations:
         lines += [*engine_tables(evaluations[TRACKING]), ""]
