@@ -73,6 +73,10 @@ SHIPPED = (
     "NozzleTVC-v0",
     "NozzleTVC-v0-spread",  # trained with plant_spread=0.2 (experiments/configs/ppo_nozzle_tvc_spread.toml)
     "LauncherPitch-v0",
+    # residual policies over a classical design (agents.residual; experiments/configs/*_residual.toml)
+    "EngineTracking-v0-residual",
+    "EngineThrottle-v0-residual",
+    "NozzleTVC-v0-residual",
 )
 
 

@@ -24,9 +24,12 @@ THROTTLE = "ssme_envs/EngineThrottle-v0"
 NOZZLE = "ssme_envs/NozzleTVC-v0"
 # env -> (controllers, scenarios) evaluated
 RUNS = {
-    TRACKING: (["lqi", "lq:truth", "ppo"], ["nominal", "noise"]),
-    THROTTLE: (["scheduled", "ppo"], ["mission"]),
-    NOZZLE: (["lqi", "hysteresis", "ppo"], ["random_steps", "sine_sweep_strong", "sine_sweep_strong_linear"]),
+    TRACKING: (["lqi", "lq:truth", "ppo", "ppo:residual"], ["nominal", "noise"]),
+    THROTTLE: (["scheduled", "ppo", "ppo:residual"], ["mission", "mission_nonlinear"]),
+    NOZZLE: (
+        ["lqi", "hysteresis", "ppo", "ppo:residual"],
+        ["random_steps", "sine_sweep_strong", "sine_sweep_strong_linear"],
+    ),
 }
 
 
@@ -72,6 +75,32 @@ FIGURES: dict[str, tuple[str, Callable[[dict[str, EvaluationResult]], str]]] = {
     "throttle_ppo_over_scheduled": (
         "EngineThrottle mission: PPO cost over the scheduled servo's",
         lambda e: _ratio(_cost(e[THROTTLE], "mission", "ppo") / _cost(e[THROTTLE], "mission", "scheduled")),
+    ),
+    "tracking_residual_over_lq_truth_nominal": (
+        "EngineTracking nominal: residual PPO (over the LQ servo) over the LQ-optimal tracker on the truth",
+        lambda e: _ratio(
+            _cost(e[TRACKING], "nominal", "ppo:residual") / _cost(e[TRACKING], "nominal", "lq:truth")
+        ),
+    ),
+    "throttle_residual_over_scheduled": (
+        "EngineThrottle mission: residual PPO (over the scheduled servo) cost over the scheduled servo's",
+        lambda e: _ratio(
+            _cost(e[THROTTLE], "mission", "ppo:residual") / _cost(e[THROTTLE], "mission", "scheduled")
+        ),
+    ),
+    "throttle_residual_over_scheduled_nonlinear": (
+        "EngineThrottle mission on the nonlinear engine: residual PPO cost over the scheduled servo's",
+        lambda e: _ratio(
+            _cost(e[THROTTLE], "mission_nonlinear", "ppo:residual")
+            / _cost(e[THROTTLE], "mission_nonlinear", "scheduled")
+        ),
+    ),
+    "nozzle_residual_over_hysteresis_strong": (
+        "NozzleTVC strong joint, sine sweep: residual PPO (over the compensated servo) cost over its base's",
+        lambda e: _ratio(
+            _cost(e[NOZZLE], "sine_sweep_strong", "ppo:residual")
+            / _cost(e[NOZZLE], "sine_sweep_strong", "hysteresis")
+        ),
     ),
     "nozzle_ppo_over_lqi": (
         "NozzleTVC random steps: PPO cost over the LQ servo's",

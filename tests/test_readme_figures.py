@@ -32,7 +32,7 @@ def test_every_ratio_in_the_readme_is_in_the_table():
 def test_every_figure_of_the_table_is_quoted_as_written():
     readme = (ROOT / "README.md").read_text()
     figures = _table()
-    assert len(figures) == 7
+    assert len(figures) == 11
     for key, value in figures.items():
         if value.endswith("x"):
             assert value in _readme_ratios(), key

@@ -24,12 +24,15 @@ from ssme_envs.report_costs import (
 # env -> (controllers, scenarios) that `ssme-envs report` evaluates
 REPORT_PLAN: dict[str, tuple[str, list[str]]] = {
     TRACKING: (
-        "zero,pi,lqi,mpc,ppo,pi:truth,lqi:truth,mpc:truth,lq:truth,ppo:identified",
+        "zero,pi,lqi,mpc,ppo,pi:truth,lqi:truth,mpc:truth,lq:truth,ppo:identified,ppo:residual",
         ["nominal", "valves", "noise", "pc_step", "mr_step", "stuck_valve"],
     ),
-    THROTTLE: ("zero,pi,scheduled,scheduled:truth,ppo", ["mission", "mission_linear"]),
+    THROTTLE: (
+        "zero,pi,scheduled,scheduled:truth,ppo,ppo:residual",
+        ["mission", "mission_linear", "mission_nonlinear"],
+    ),
     NOZZLE: (
-        "zero,pid,lqi,hysteresis,ppo",
+        "zero,pid,lqi,hysteresis,ppo,ppo:residual",
         [
             "step",
             "sine_sweep",

@@ -39,12 +39,18 @@ _PPO_FAULT = (
     "trained on the fault-free truth (experiments/configs/ppo_engine_tracking.toml sets no fault): "
     "it has never seen a stuck valve"
 )
+_RESIDUAL_FAULT = (
+    "a correction to the LQ servo, which costs more than the zero action here (its cause above), "
+    "trained on the fault-free truth (experiments/configs/ppo_engine_tracking_residual.toml): it "
+    "has never seen a stuck valve"
+)
 # (env, scenario, controller) -> why it costs more than the zero action, found by runs of the
 # scenario (rollouts, the linear loop's eigenvalues); the measured lines come with it
 WRITTEN_CAUSES: dict[tuple[str, str, str], str] = {
     **{(THROTTLE, s, "pi"): _PI_COUPLING for s in ("mission", "mission_linear")},
     **{(TRACKING, "stuck_valve", c): _STUCK_COUPLED for c in ("lqi", "lqi:truth", "lq:truth")},
     **{(TRACKING, "stuck_valve", c): _PPO_FAULT for c in ("ppo", "ppo:identified")},
+    (TRACKING, "stuck_valve", "ppo:residual"): _RESIDUAL_FAULT,
     (NOZZLE, "sine_sweep_strong", "pid"): _STRONG_PID,
 }
 SATURATED = 0.05  # time at the limit (share) from which it is named as a cause

@@ -1,0 +1,111 @@
+"""The benchmark's RL line: on every scenario of every env, the best shipped policy beside the best
+classical design, with each shipped policy's training record.
+
+    python experiments/learned_vs_classical.py [--episodes 50]
+
+Evaluates the main report's controllers and scenarios (``ssme_envs.pipelines.report_plan``, with
+every shipped policy: ``ppo``, ``ppo:identified``, ``ppo:spread``, ``ppo:residual`` where the env
+has one) with the harness (seed 0, the same episodes for every controller), and writes
+experiments/results/learned_vs_classical.md. The residual policies are trained by
+``ssme-envs train --config experiments/configs/ppo_<env>_residual.toml --out
+agents/policies/<Env>-v0-residual``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import tomllib
+
+from agents import parse_controller
+from agents.sb3 import SHIPPED, shipped_policy
+from ssme_envs.evaluation import evaluate
+from ssme_envs.outputs import write_text
+from ssme_envs.pipelines import report_plan
+from ssme_envs.report_costs import LEARNED_GOAL, best_of_each, learned_over_classical_tables
+
+HERE = Path(__file__).resolve().parent
+RESULTS = HERE / "results" / "learned_vs_classical.md"
+SEED = 0
+
+
+def policies_of(env_id: str) -> list[str]:
+    """The shipped policies of an env as controller specs."""
+    name = env_id.split("/")[-1]
+    specs = []
+    for shipped in SHIPPED:
+        if shipped == name:
+            specs.append("ppo")
+        elif shipped.startswith(name + "-"):
+            specs.append("ppo:" + shipped.removeprefix(name + "-"))
+    return specs
+
+
+def training_rows() -> list[str]:
+    rows = [
+        "| policy | config | residual base (scale) | steps | wall-clock s | kept at |",
+        "|---|---|---|---|---|---|",
+    ]
+    for name in SHIPPED:
+        env_name, _, variant = name.partition("-v0")
+        env_id, trained_on = f"ssme_envs/{env_name}-v0", variant.removeprefix("-") or "truth"
+        folder = shipped_policy(env_id, trained_on)
+        summary = json.loads((folder / "training.json").read_text())
+        config = tomllib.loads((folder / "config.toml").read_text())
+        residual = f"{config['residual']} ({config['residual_scale']:g})" if "residual" in config else "-"
+        rows.append(
+            f"| {name} | agents/policies/{name}/config.toml | {residual} | {summary['steps']:,} | "
+            f"{summary['seconds']:.0f} | {summary['kept']['steps']:,} |"
+        )
+    return rows
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--episodes", type=int, default=50)
+    args = parser.parse_args()
+    evaluations = {}
+    for env_id, (specs, scenarios) in report_plan(learned=True).items():
+        names = [s for s in specs if not s.startswith("ppo")] + policies_of(env_id)
+        factories = {name: parse_controller(name, env_id) for name in names}
+        print(f"{env_id}: {', '.join(names)} on {', '.join(scenarios)}", flush=True)
+        evaluations[env_id] = evaluate(env_id, factories, scenarios, args.episodes, SEED)
+    met = {
+        env_id: sum(lp <= LEARNED_GOAL * lc for _, lc, _, lp in best_of_each(r).values())
+        for env_id, r in evaluations.items()
+    }
+    counts = ", ".join(
+        f"{e.split('/')[-1]} {met[e]} of {len(best_of_each(r))}" for e, r in evaluations.items()
+    )
+    lines = [
+        "# Learned policies against classical designs",
+        "",
+        f"Command: `python experiments/learned_vs_classical.py --episodes {args.episodes}` (seed {SEED}, the "
+        "same episodes for every controller; the main report's scenarios and classical controllers, "
+        "and every shipped policy of the env).",
+        "",
+        *learned_over_classical_tables(evaluations)[2:],
+        "",
+        f"Scenarios where the best learned policy is within {LEARNED_GOAL:.2f}x the best classical design: "
+        f"{counts}.",
+        "",
+        "## Every cost",
+        "",
+    ]
+    for env_id, results in evaluations.items():
+        names = list(dict.fromkeys(c for rows in results.values() for c in rows))
+        header = "| scenario | " + " | ".join(names) + " |"
+        lines += [f"### {env_id}", "", header, "|---" * (len(names) + 1) + "|"]
+        for scenario, rows in results.items():
+            cells = " | ".join(f"{rows[c].cost_mean:.3f}" if c in rows else "-" for c in names)
+            lines.append(f"| {scenario} | {cells} |")
+        lines.append("")
+    lines += ["## Training of the shipped policies (this machine's 2 CPU cores)", "", *training_rows(), ""]
+    write_text(RESULTS, "\n".join(lines))
+    print(f"wrote {RESULTS}")
+
+
+if __name__ == "__main__":
+    main()
