@@ -16,7 +16,7 @@ import numpy as np
 from agents.base import BatchController, Controller, env_id_of, task_of
 from agents.lqi import LQIServo, ScheduledLQI
 from agents.mpc import MPC
-from agents.pid import DecoupledPI, PlacedPID
+from agents.pid import DecoupledPI, PlacedPID, ScheduledPI
 from agents.plants import DESIGN_SOURCES
 from agents.policy_files import ALGOS
 from agents.tvc import HysteresisCompensated
@@ -82,6 +82,7 @@ CONTROLLERS: dict[str, tuple[Callable[[Any, str], Controller], tuple[str, ...], 
     "lqi": (LQIServo, (TRACKING, NOZZLE, LAUNCHER), "identified"),
     "mpc": (MPC, (TRACKING,), "identified"),
     "scheduled": (ScheduledLQI, (THROTTLE,), "identified"),
+    "pi_scheduled": (ScheduledPI, (THROTTLE,), "identified"),
     "pid": (PlacedPID, (NOZZLE, LAUNCHER), "identified"),
     "hysteresis": (_compensated, (NOZZLE,), "identified"),
     "lq": (_lq_tracker, (TRACKING,), "identified"),
@@ -159,6 +160,7 @@ __all__ = [
     "LQIServo",
     "PlacedPID",
     "ScheduledLQI",
+    "ScheduledPI",
     "ZeroAction",
     "controller_names",
     "make_controller",

@@ -35,26 +35,89 @@ class DecoupledPI(BatchController):
         super().__init__()
         self.design = linear_design(env, design)
         self.errors = columns(task_of(env).observation, "pc_err_pct", "mr_err_pct")
-        d = self.design
-        x = np.zeros((d.A.shape[0], 2))
-        steps = []
-        for _ in range(200):  # unit steps on both valves, one column each
-            steps.append(d.C @ x)
-            x = d.A @ x + d.B
-        response = np.array(steps)  # (T, outputs, inputs)
-        gains = [simc_pi(response[:, i, i], d.dt) for i in range(2)]
-        self.kc = np.array([g[0] for g in gains])
-        self.ki = np.array([g[1] for g in gains])
+        self.kc, self.ki = diagonal_simc(self.design)
 
     def initial_state(self, n: int) -> dict[str, np.ndarray]:
         return {"u": np.zeros((n, 2)), "e": np.zeros((n, 2))}
 
+    def gains(self, obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(Kc, Ki) of the two loops, (2,) or per env (N, 2)."""
+        return self.kc, self.ki
+
     def compute(self, obs: np.ndarray) -> np.ndarray:
         e = obs[:, self.errors] / 100.0
         s, limit = self.state, self.design.input_limit
-        s["u"] = np.clip(s["u"] + self.kc * (e - s["e"]) + self.ki * self.design.dt * e, -limit, limit)
+        kc, ki = self.gains(obs)
+        s["u"] = np.clip(s["u"] + kc * (e - s["e"]) + ki * self.design.dt * e, -limit, limit)
         s["e"] = e
         return s["u"] / self.design.ports.input_scale
+
+
+def diagonal_simc(design: Any) -> tuple[np.ndarray, np.ndarray]:
+    """SIMC (Kc, Ki) of the loops Pc -> OPOV and MR -> FPOV from the design model's unit steps."""
+    x = np.zeros((design.A.shape[0], 2))
+    steps = []
+    for _ in range(200):  # unit steps on both valves, one column each
+        steps.append(design.C @ x)
+        x = design.A @ x + design.B
+    response = np.array(steps)  # (T, outputs, inputs)
+    gains = [simc_pi(response[:, i, i], design.dt) for i in range(2)]
+    return np.array([g[0] for g in gains]), np.array([g[1] for g in gains])
+
+
+def coupled_radius(design: Any, kc: np.ndarray, ki: np.ndarray) -> float:
+    """Spectral radius of the loop of both velocity-form PIs closed around the whole design model
+    (cross-coupling included): state (x, u, previous error), e = -C x."""
+    A, B, C = design.A, design.B, design.C
+    m = B.shape[1]
+    kp, kd = np.diag(kc + ki * design.dt), np.diag(kc)
+    loop = np.block([
+        [A - B @ kp @ C, B, -B @ kd],
+        [-kp @ C, np.eye(m), -kd],
+        [-C, np.zeros((m, m)), np.zeros((m, m))],
+    ])  # fmt: skip
+    return float(np.abs(np.linalg.eigvals(loop)).max())
+
+
+class ScheduledPI(DecoupledPI):
+    """The decoupled PI as an engineer schedules it for EngineThrottle: SIMC gains on each power
+    level's model (the identified ones at 70-110 %, or the linked truth every 4 % over 65-109 %),
+    each level's pair scaled down (x 0.8 per try) until the coupled loop on that level's whole
+    model has a spectral radius below ``RADIUS``, interpolated linearly in the commanded power read
+    from the reference (``P = 100 + Pc reference in %``), as the scheduled LQ servo is."""
+
+    name = "pi_scheduled"
+    RADIUS = 0.97  # the coupled loop's spectral radius each level's gains must give at most
+
+    def __init__(self, env: Any, design: str = "identified") -> None:
+        BatchController.__init__(self)
+        levels = [70.0, 80.0, 90.0, 100.0, 110.0] if design == "identified" else list(range(65, 110, 4))
+        self.levels = np.array(levels, dtype=float)
+        designs = [linear_design(env, design, power=level) for level in levels]
+        self.design = designs[0]
+        task = task_of(env)
+        self.errors = columns(task.observation, "pc_err_pct", "mr_err_pct")
+        (self.power_reference,) = columns(task.observation, "pc_ref_pct")
+        kcs, kis, self.detune = [], [], []
+        for d in designs:
+            kc, ki = diagonal_simc(d)
+            factor = 1.0
+            while coupled_radius(d, factor * kc, factor * ki) >= self.RADIUS and factor > 1e-3:
+                factor *= 0.8
+            kcs.append(factor * kc)
+            kis.append(factor * ki)
+            self.detune.append(factor)
+        self.kc_table, self.ki_table = np.array(kcs), np.array(kis)
+        self.kc, self.ki = self.kc_table[len(levels) // 2], self.ki_table[len(levels) // 2]
+
+    def gains(self, obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        p = np.clip(100.0 + obs[:, self.power_reference], self.levels[0], self.levels[-1])
+        i = np.clip(np.searchsorted(self.levels, p, side="right") - 1, 0, len(self.levels) - 2)
+        w = ((p - self.levels[i]) / (self.levels[i + 1] - self.levels[i]))[:, None]
+        return (
+            (1 - w) * self.kc_table[i] + w * self.kc_table[i + 1],
+            (1 - w) * self.ki_table[i] + w * self.ki_table[i + 1],
+        )
 
 
 def placed_pid(
@@ -102,4 +165,13 @@ class PlacedPID(BatchController):
         return (u / self.design.ports.input_scale)[:, None]
 
 
-__all__ = ["OMEGA", "DecoupledPI", "PlacedPID", "placed_pid", "simc_pi"]
+__all__ = [
+    "OMEGA",
+    "DecoupledPI",
+    "PlacedPID",
+    "ScheduledPI",
+    "coupled_radius",
+    "diagonal_simc",
+    "placed_pid",
+    "simc_pi",
+]

@@ -77,6 +77,7 @@ SHIPPED = (
     "EngineTracking-v0-residual",
     "EngineThrottle-v0-residual",
     "NozzleTVC-v0-residual",
+    "LauncherPitch-v0-residual",
 )
 
 

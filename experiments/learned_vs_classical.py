@@ -29,6 +29,16 @@ from ssme_envs.report_costs import LEARNED_GOAL, best_of_each, learned_over_clas
 HERE = Path(__file__).resolve().parent
 RESULTS = HERE / "results" / "learned_vs_classical.md"
 SEED = 0
+TRIED = ("sac", "td3")  # off-policy runs tried beside PPO, not shipped: experiments/runs/<algo>_<env>/
+
+
+def tried_runs(env_id: str) -> dict[str, Path]:
+    """``{algo: run directory}`` of the SAC and TD3 runs of an env found under experiments/runs/
+    (``ssme-envs train --config experiments/configs/sac_nozzle_tvc.toml --out
+    experiments/runs/sac_nozzle_tvc``)."""
+    stem = "".join("_" + c.lower() if c.isupper() else c for c in env_id.split("/")[-1][:-3]).strip("_")
+    runs = {algo: HERE / "runs" / f"{algo}_{stem}" for algo in TRIED}
+    return {algo: run for algo, run in runs.items() if (run / "training.json").exists()}
 
 
 def policies_of(env_id: str) -> list[str]:
@@ -70,23 +80,27 @@ def main() -> None:
     for env_id, (specs, scenarios) in report_plan(learned=True).items():
         names = [s for s in specs if not s.startswith("ppo")] + policies_of(env_id)
         factories = {name: parse_controller(name, env_id) for name in names}
+        for algo, run in tried_runs(env_id).items():
+            factories[algo] = parse_controller(f"{algo}:{run}", env_id)
+            names.append(algo)
         print(f"{env_id}: {', '.join(names)} on {', '.join(scenarios)}", flush=True)
         evaluations[env_id] = evaluate(env_id, factories, scenarios, args.episodes, SEED)
     met = {
-        env_id: sum(lp <= LEARNED_GOAL * lc for _, lc, _, lp in best_of_each(r).values())
+        env_id: sum(lp <= LEARNED_GOAL * lc for _, lc, _, lp in best_of_each(r, TRIED).values())
         for env_id, r in evaluations.items()
     }
     counts = ", ".join(
-        f"{e.split('/')[-1]} {met[e]} of {len(best_of_each(r))}" for e, r in evaluations.items()
+        f"{e.split('/')[-1]} {met[e]} of {len(best_of_each(r, TRIED))}" for e, r in evaluations.items()
     )
     lines = [
         "# Learned policies against classical designs",
         "",
         f"Command: `python experiments/learned_vs_classical.py --episodes {args.episodes}` (seed {SEED}, the "
         "same episodes for every controller; the main report's scenarios and classical controllers, "
-        "and every shipped policy of the env).",
+        "and every shipped policy of the env; the SAC and TD3 runs tried beside PPO, not shipped, appear "
+        "in the cost tables only).",
         "",
-        *learned_over_classical_tables(evaluations)[2:],
+        *learned_over_classical_tables(evaluations, TRIED)[2:],
         "",
         f"Scenarios where the best learned policy is within {LEARNED_GOAL:.2f}x the best classical design: "
         f"{counts}.",
@@ -103,6 +117,16 @@ def main() -> None:
             lines.append(f"| {scenario} | {cells} |")
         lines.append("")
     lines += ["## Training of the shipped policies (this machine's 2 CPU cores)", "", *training_rows(), ""]
+    tried = [(e, a, r) for e in evaluations for a, r in tried_runs(e).items()]
+    if tried:
+        lines += ["Tried beside PPO (configs in experiments/configs/, runs in experiments/runs/):", ""]
+        for env_id, algo, run in tried:
+            summary = json.loads((run / "training.json").read_text())
+            lines.append(
+                f"- {env_id} {algo}: experiments/configs/{run.name}.toml, {summary['steps']:,} steps in "
+                f"{summary['seconds']:.0f} s, kept at {summary['kept']['steps']:,} steps"
+            )
+        lines.append("")
     write_text(RESULTS, "\n".join(lines))
     print(f"wrote {RESULTS}")
 

@@ -28,7 +28,7 @@ REPORT_PLAN: dict[str, tuple[str, list[str]]] = {
         ["nominal", "valves", "noise", "pc_step", "mr_step", "stuck_valve"],
     ),
     THROTTLE: (
-        "zero,pi,scheduled,scheduled:truth,ppo,ppo:residual",
+        "zero,pi,pi_scheduled,scheduled,scheduled:truth,ppo,ppo:residual",
         ["mission", "mission_linear", "mission_nonlinear"],
     ),
     NOZZLE: (
@@ -45,7 +45,7 @@ REPORT_PLAN: dict[str, tuple[str, list[str]]] = {
             "sine_sweep_strong_linear",
         ],
     ),
-    LAUNCHER: ("zero,pid,lqi,robust,ppo", ["step", "attitude", "random_steps", "linear_nozzle"]),
+    LAUNCHER: ("zero,pid,lqi,robust,ppo,ppo:residual", ["step", "attitude", "random_steps", "linear_nozzle"]),
 }
 
 # env -> (controllers, scenarios) run over drawn plants (plant_spread, DEFAULT_SPREAD), PLANTS_PER_EPISODE

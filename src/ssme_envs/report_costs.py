@@ -165,13 +165,17 @@ def cost_over_zero_tables(evaluations: dict[str, EvaluationResult]) -> list[str]
 LEARNED_GOAL = 1.10  # the benchmark's bar: the best learned cost over the best classical's
 
 
-def best_of_each(results: EvaluationResult) -> dict[str, tuple[str, float, str, float]]:
+def best_of_each(
+    results: EvaluationResult, skip: tuple[str, ...] = ()
+) -> dict[str, tuple[str, float, str, float]]:
     """``{scenario: (best classical, its cost, best learned, its cost)}`` on the scenarios where
-    both kinds ran (classical designs on the identified model and on the truth alike)."""
+    both kinds ran (classical designs on the identified model and on the truth alike), leaving
+    out the controllers named in ``skip``."""
     best = {}
     for scenario, rows in results.items():
-        classical = {c: m.cost_mean for c, m in rows.items() if is_classical(c)}
-        learned = {c: m.cost_mean for c, m in rows.items() if c.split(":")[0] in LEARNED}
+        kept = {c: m.cost_mean for c, m in rows.items() if c not in skip}
+        classical = {c: cost for c, cost in kept.items() if is_classical(c)}
+        learned = {c: cost for c, cost in kept.items() if c.split(":")[0] in LEARNED}
         if classical and learned:
             c, lc = min(classical.items(), key=lambda kv: kv[1])
             p, lp = min(learned.items(), key=lambda kv: kv[1])
@@ -179,8 +183,11 @@ def best_of_each(results: EvaluationResult) -> dict[str, tuple[str, float, str, 
     return best
 
 
-def learned_over_classical_tables(evaluations: dict[str, EvaluationResult]) -> list[str]:
-    """Per env and scenario the best learned policy's cost over the best classical design's."""
+def learned_over_classical_tables(
+    evaluations: dict[str, EvaluationResult], skip: tuple[str, ...] = ()
+) -> list[str]:
+    """Per env and scenario the best learned policy's cost over the best classical design's
+    (controllers in ``skip`` left out)."""
     lines = [
         "### Best learned policy against the best classical design",
         "",
@@ -194,7 +201,7 @@ def learned_over_classical_tables(evaluations: dict[str, EvaluationResult]) -> l
         "|---|---|---|---|---|---|---|",
     ]
     for env_id, results in evaluations.items():
-        for scenario, (c, lc, p, lp) in best_of_each(results).items():
+        for scenario, (c, lc, p, lp) in best_of_each(results, skip).items():
             flag = "" if lp <= LEARNED_GOAL * lc else " (above the bar)"
             lines.append(f"| {env_id} | {scenario} | {c} | {lc:.3f} | {p} | {lp:.3f} | {lp / lc:.2f}{flag} |")
     return lines
