@@ -6,8 +6,9 @@ normalization.json: no pickle); the policies of SHIP (each env's, trained on its
 copied into agents/policies/<name>/. Every run is then
 evaluated by the harness beside the LQ servo (or the scheduled one) on the plant it was trained
 for and on the full truth. The policy trained on EngineTracking's identified model is shipped too
-(the sim-to-real comparison), and NozzleTVC's fine-tuned on drawn plants (after the nominal one,
-which it starts from). Writes experiments/results/rl_training.md; then run
+(the sim-to-real comparison), NozzleTVC's fine-tuned on drawn plants (after the nominal one,
+which it starts from), and the residual policies over a classical design (``*_residual``: the
+"PPO cost" column is the residual policy's with its base). Writes experiments/results/rl_training.md; then run
 experiments/launcher_rl.py, which appends the LauncherPitch section.
 
     python experiments/train_policies.py [--evaluate-only] [config names ...]
@@ -23,7 +24,7 @@ import sys
 from pathlib import Path
 
 from agents import parse_controller
-from agents.sb3 import PolicyController, load_config, train
+from agents.sb3 import load_config, train
 from ssme_envs.evaluation import SCENARIOS, evaluate
 
 HERE = Path(__file__).resolve().parent
@@ -34,6 +35,11 @@ SHIP = {
     "ppo_nozzle_tvc": "NozzleTVC-v0",
     "ppo_nozzle_tvc_spread": "NozzleTVC-v0-spread",  # after ppo_nozzle_tvc: it starts from that policy
     "ppo_launcher_pitch": "LauncherPitch-v0",
+    # residual policies over a classical design (agents/residual.py)
+    "ppo_engine_tracking_residual": "EngineTracking-v0-residual",
+    "ppo_engine_throttle_residual": "EngineThrottle-v0-residual",
+    "ppo_nozzle_tvc_residual": "NozzleTVC-v0-residual",
+    "ppo_launcher_pitch_residual": "LauncherPitch-v0-residual",
 }
 # the scenarios of the plant each config trains on (then the full truth's)
 PLANT = {
@@ -45,6 +51,10 @@ PLANT = {
     "ppo_nozzle_tvc_mixed": ("random_steps", "step", "sine_sweep", "attitude"),
     "ppo_nozzle_tvc_spread": ("random_steps", "step", "sine_sweep", "attitude"),
     "ppo_launcher_pitch": ("random_steps", "step", "attitude", "linear_nozzle"),
+    "ppo_engine_tracking_residual": ("noise", "pc_step", "mr_step"),
+    "ppo_engine_throttle_residual": ("mission", "mission_nonlinear"),
+    "ppo_nozzle_tvc_residual": ("random_steps", "step", "sine_sweep", "attitude", "sine_sweep_strong"),
+    "ppo_launcher_pitch_residual": ("random_steps", "step", "attitude", "linear_nozzle"),
 }
 TRUTH = {"ssme_envs/EngineTracking-v0": "noise", "ssme_envs/EngineThrottle-v0": "mission",
          "ssme_envs/NozzleTVC-v0": "random_steps", "ssme_envs/LauncherPitch-v0": "random_steps"}  # fmt: skip
@@ -89,7 +99,7 @@ def main(names: list[str], evaluate_only: bool = False) -> None:
         baselines = BASELINES[env_id]
         for scenario in dict.fromkeys([*PLANT[name], TRUTH[env_id]]):
             assert scenario in SCENARIOS[env_id]
-            factories = {"ppo": lambda env, out=out: PolicyController(out)}
+            factories = {"ppo": parse_controller(f"ppo:{out}", env_id)}  # with its base if residual
             factories |= {spec: parse_controller(spec, env_id) for spec in baselines}
             results = evaluate(env_id, factories, [scenario], episodes=50)[scenario]
             ppo = results["ppo"]["cost_mean"]
