@@ -87,7 +87,7 @@ class ScheduledPI(DecoupledPI):
     from the reference (``P = 100 + Pc reference in %``), as the scheduled LQ servo is."""
 
     name = "pi_scheduled"
-    RADIUS = 0.97  # the coupled loop's spectral radius each level's gains must give at most
+    RADIUS = 0.97  # each level's gains must give the coupled loop a spectral radius below this
 
     def __init__(self, env: Any, design: str = "identified") -> None:
         BatchController.__init__(self)
@@ -99,16 +99,18 @@ class ScheduledPI(DecoupledPI):
         self.errors = columns(task.observation, "pc_err_pct", "mr_err_pct")
         (self.power_reference,) = columns(task.observation, "pc_ref_pct")
         kcs, kis, self.detune = [], [], []
-        for d in designs:
+        for level, d in zip(levels, designs, strict=True):
             kc, ki = diagonal_simc(d)
             factor = 1.0
-            while coupled_radius(d, factor * kc, factor * ki) >= self.RADIUS and factor > 1e-3:
+            while coupled_radius(d, factor * kc, factor * ki) >= self.RADIUS:
                 factor *= 0.8
+                if factor < 0.01:  # slower than this, the PI would barely act
+                    raise ValueError(f"{self.name}: no detuning of the SIMC gains gives the coupled loop "
+                                     f"at {level:g} % a spectral radius below {self.RADIUS}")  # fmt: skip
             kcs.append(factor * kc)
             kis.append(factor * ki)
             self.detune.append(factor)
         self.kc_table, self.ki_table = np.array(kcs), np.array(kis)
-        self.kc, self.ki = self.kc_table[len(levels) // 2], self.ki_table[len(levels) // 2]
 
     def gains(self, obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         p = np.clip(100.0 + obs[:, self.power_reference], self.levels[0], self.levels[-1])

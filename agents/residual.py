@@ -6,10 +6,11 @@ action is *added* to a fixed base controller's: the env applies
     clip(a_base + scale * clip(a_policy, -1, 1), -1, 1),
 
 and the policy observes the env's observation with the base action appended (the base
-controller's integrator and observer state reach the policy only through it). A residual that
-outputs zero is the base controller itself, so learning starts from the classical design and a
-policy whose evaluation falls behind it is never kept over it (``ssme-envs train`` keeps the best
-evaluation, which the first evaluation of a near-zero residual sets near the base's cost).
+controller's integrator and observer state reach the policy only through it). A zero correction
+is the base controller itself, and a freshly built SB3 policy's action is near zero (its output
+layer starts at a small scale), so learning starts near the classical design. The policy kept is
+the best of the training's evaluations (all on the same episodes); it can still cost more than its
+base on scenarios the evaluations weigh little (the main report says where).
 
 The base is a controller spec of the env (``"scheduled"``, ``"hysteresis"``, ...) with its
 design model; a trained residual policy records it in ``policy.json`` and acts only with it
@@ -38,14 +39,21 @@ def check_residual(base: Any, scale: Any, env_id: str, where: str = "residual") 
     """The residual, or ValueError naming what is wrong: ``base`` a classical controller of the env
     (not a learned policy: a residual over a residual would hide what acts), ``scale`` in (0, 2]."""
     from agents import CONTROLLERS, controller_names
+    from agents.plants import DESIGN_SOURCES
+    from ssme_envs.envs.catalogue import ENVS
 
+    if env_id not in ENVS:
+        raise ValueError(f"{where}: unknown env {env_id!r}; choose one of {', '.join(ENVS)}")
     if not isinstance(base, str):
         raise ValueError(f"{where}: base must be a controller name, got {base!r}")
-    name = base.partition(":")[0]
+    name, _, design = base.partition(":")
     classical = [c for c in controller_names(env_id) if c != "ppo"]
     if name not in classical or name not in CONTROLLERS:
         raise ValueError(f"{where}: base {base!r} is not a classical controller of {env_id}; "
                          f"choose from {', '.join(classical)}")  # fmt: skip
+    if design and design not in DESIGN_SOURCES:
+        raise ValueError(f"{where}: base {base!r} names no design model; after the colon write "
+                         f"{' or '.join(DESIGN_SOURCES)}")  # fmt: skip
     ok = isinstance(scale, int | float) and not isinstance(scale, bool) and math.isfinite(scale)
     if not ok or not 0 < scale <= 2:
         raise ValueError(f"{where}: scale must be a number in (0, 2], got {scale!r}")

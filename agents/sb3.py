@@ -110,7 +110,11 @@ def check_config(config: dict[str, Any], source: str = "config") -> dict[str, An
             if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
                 raise ValueError(f"{source}: hyperparameters.{key} must be a number, got {value!r}")
     for key, value in full["policy"].items():
-        if key == "log_std_init":  # the initial exploration noise, log of its std
+        if key == "log_std_init":  # the initial exploration noise, log of its std (PPO's Gaussian)
+            if full["algo"] != "ppo":
+                raise ValueError(
+                    f"{source}: policy.log_std_init sets PPO's initial noise, not {full['algo']}'s"
+                )
             if isinstance(value, bool) or not isinstance(value, int | float) or not -5 <= value <= 2:
                 raise ValueError(f"{source}: policy.log_std_init must be a number in [-5, 2], got {value!r}")
             continue
@@ -252,7 +256,9 @@ def train(config: dict[str, Any], out: Path, progress: bool = True) -> dict[str,
         if residual is not None:  # each vector env with its own base controller
             import gymnasium as gym
 
-            base = base_controller(residual, gym.make(env_id, **options), env_id)
+            design_env = gym.make(env_id, **options)
+            base = base_controller(residual, design_env, env_id)
+            design_env.close()
             sb3_env = residual_vec_env(sb3_env, base, residual.scale)
         return VecMonitor(sb3_env)
 
@@ -268,10 +274,10 @@ def train(config: dict[str, Any], out: Path, progress: bool = True) -> dict[str,
             "MlpPolicy", venv, seed=seed, device="cpu", verbose=0, policy_kwargs=policy_kwargs,
             tensorboard_log=str(out / "tensorboard") if config["tensorboard"] else None, **hyper,
         )  # fmt: skip
-    except (AssertionError, ValueError) as exc:  # SB3 checks hyperparameter values with asserts
-        raise ValueError(f"hyperparameters: {exc}") from None
+    except (AssertionError, TypeError, ValueError) as exc:  # SB3 checks values with asserts
+        raise ValueError(f"hyperparameters or policy: {exc}") from None
     if "init_policy" in config:
-        _start_from(model, venv, config["init_policy"], algo, env_id)
+        _start_from(model, venv, config["init_policy"], algo, env_id, residual)
     history: list[dict[str, Any]] = []
     best: dict[str, Any] = {"return": -math.inf}
 
@@ -320,12 +326,20 @@ def train(config: dict[str, Any], out: Path, progress: bool = True) -> dict[str,
     return summary
 
 
-def _start_from(model: Any, venv: Any, path: str, algo: str, env_id: str) -> None:
+def _start_from(
+    model: Any, venv: Any, path: str, algo: str, env_id: str, residual: Residual | None = None
+) -> None:
     """Start ``model`` (and ``venv``'s observation statistics) from a trained policy directory
     of the same algorithm, env and network (fine-tuning); ValueError naming a mismatch."""
     loaded = load_trained(path, algo)
     if loaded.env_id != env_id:
         raise ValueError(f"init_policy {path}: trained on {loaded.env_id}, not {env_id}")
+    if loaded.residual != residual:
+
+        def said(r: Residual | None) -> str:
+            return "no residual" if r is None else f"a residual over {r.base} (scale {r.scale:g})"
+
+        raise ValueError(f"init_policy {path}: it is {said(loaded.residual)}, this config {said(residual)}")
     mine, theirs = model.policy.state_dict(), loaded.policy.state_dict()
     if {k: v.shape for k, v in mine.items()} != {k: v.shape for k, v in theirs.items()}:
         raise ValueError(f"init_policy {path}: its network differs from policy.net_arch of this config")
@@ -383,9 +397,16 @@ def load_trained(path: str | Path, algo: str | None = None, allow_pickle: bool =
 def policy_controller(loaded: LoadedPolicy, env: Any, env_id: str) -> BatchController:
     """A loaded policy as the controller of ``env``: a :class:`PolicyController`, or for a residual
     policy the :class:`~agents.residual.ResidualController` over its base designed for ``env``."""
-    controller = PolicyController(loaded)
+    controller = PolicyController(loaded, residual_ok=True)
     if loaded.residual is None:
         return controller
+    from agents.base import task_of
+
+    task = task_of(env)
+    expected = len(task.observation.names) + task.n_actions
+    if controller.size != expected:
+        raise ValueError(f"{loaded.source}: a residual policy on {controller.size} observations; {env_id} "
+                         f"with its base action gives {expected}")  # fmt: skip
     base = base_controller(loaded.residual, env, env_id)
     return ResidualController(controller, base, loaded.residual.scale)
 
@@ -402,15 +423,27 @@ class PolicyController(BatchController):
         The algorithm, checked against the directory's (needed for an SB3 zip).
     allow_pickle : bool
         Accept an SB3 ``.zip`` (unpickled on load: it can execute arbitrary code).
+    residual_ok : bool
+        Accept a residual policy (the learned part alone: :func:`policy_controller` pairs it with
+        its base); refused otherwise, as it cannot act without its base.
     """
 
     name = "rl"
 
     def __init__(
-        self, source: str | Path | LoadedPolicy, algo: str | None = None, allow_pickle: bool = False
+        self,
+        source: str | Path | LoadedPolicy,
+        algo: str | None = None,
+        allow_pickle: bool = False,
+        residual_ok: bool = False,
     ) -> None:
         super().__init__()
         loaded = source if isinstance(source, LoadedPolicy) else load_trained(source, algo, allow_pickle)
+        if loaded.residual is not None and not residual_ok:
+            raise ValueError(
+                f"{loaded.source}: a residual policy over {loaded.residual.base}; load it with its base: "
+                "the controller spec ppo:RUN_DIR, or agents.sb3.policy_controller(loaded, env, env_id)"
+            )
         self.policy = loaded.policy
         self.normalization = loaded.normalization
         self.size = int(np.prod(loaded.policy.observation_space.shape))

@@ -57,16 +57,21 @@ def test_a_zero_residual_acts_as_its_base(env_id, base, scenario):
     assert results["residual"].cost_mean == results["base"].cost_mean
 
 
-@settings(max_examples=30, deadline=None)
+@settings(max_examples=50, deadline=None)
 @given(
-    base=st.floats(-3, 3, allow_nan=False),
+    base=st.floats(-1, 1, allow_nan=False),
     correction=st.floats(-5, 5, allow_nan=False),
+    more=st.floats(0, 5, allow_nan=False),
     scale=st.floats(0.01, 2.0),
 )
-def test_applied_action_is_the_clipped_sum(base, correction, scale):
-    out = applied_action(np.array([[base]]), np.array([[correction]]), scale)[0, 0]
-    expected = min(max(base + scale * min(max(correction, -1.0), 1.0), -1.0), 1.0)
-    assert out.dtype == np.float32 and out == np.float32(expected)
+def test_the_applied_action_stays_in_range_and_moves_with_the_correction(base, correction, more, scale):
+    """Invariants, not the formula: within [-1, 1]; a zero correction is the base; a larger
+    correction never applies less; a correction beyond +-1 acts as +-1."""
+    act = lambda c: float(applied_action(np.array([[base]]), np.array([[c]]), scale)[0, 0])  # noqa: E731
+    assert -1.0 <= act(correction) <= 1.0
+    assert act(0.0) == float(np.float32(base))
+    assert act(correction + more) >= act(correction)
+    assert act(7.0) == act(1.0) and act(-7.0) == act(-1.0)
 
 
 class Recorder:
@@ -116,8 +121,9 @@ def test_the_env_gets_base_plus_scaled_correction_through_episode_ends(seed, sca
         obs, _, dones, infos = venv.step(correction)
         expected = np.clip(base.astype(np.float64) + scale * np.clip(correction, -1, 1), -1, 1)
         assert np.array_equal(inner.actions[-1], expected.astype(np.float32))
-        for i in np.flatnonzero(dones):
-            assert infos[i]["terminal_observation"].shape == (size + 1,)
+        for i in np.flatnonzero(dones):  # the episode's last observation, the last base action
+            last = infos[i]["terminal_observation"]
+            assert last.shape == (size + 1,) and last[size] == base[i, 0]
         if dones.any():
             ends += int(dones.sum())
             twin.reset(envs=np.flatnonzero(dones))
@@ -164,11 +170,35 @@ def test_a_trained_residual_records_its_base_and_loads_with_it(tmp_path):
         ({"residual": "lqi", "residual_scale": 0.0}, r"scale must be a number in \(0, 2\]"),
         ({"residual_scale": 0.5}, "residual_scale without residual"),
         ({"policy": {"log_std_init": 9.0}}, r"log_std_init must be a number in \[-5, 2\]"),
+        (
+            {"algo": "td3", "policy": {"log_std_init": -2.0}},
+            "log_std_init sets PPO's initial noise, not td3's",
+        ),
+        ({"residual": "lqi:bogus"}, "names no design model; after the colon write identified or truth"),
+        ({"env": "ssme_envs/Nope-v0", "residual": "lqi"}, "unknown env 'ssme_envs/Nope-v0'"),
     ],
 )
 def test_bad_residual_configs_name_the_problem(config, message):
     with pytest.raises(ValueError, match=message):
         check_config({"env": NOZZLE, "algo": "ppo", **config})
+
+
+def test_a_residual_policy_does_not_act_without_its_base():
+    from agents.sb3 import PolicyController, shipped_policy
+
+    with pytest.raises(ValueError, match="a residual policy over hysteresis; load it with its base"):
+        PolicyController(shipped_policy(NOZZLE, "residual"))
+
+
+def test_init_policy_names_a_residual_mismatch(tmp_path, capsys):
+    from agents.sb3 import shipped_policy
+
+    config = tmp_path / "c.toml"
+    start = f'init_policy = "{shipped_policy(NOZZLE, "residual")}"\n'
+    config.write_text(start + _run_config(tmp_path).replace('"hysteresis"', '"lqi"'))
+    assert main(["train", "--config", str(config), "--steps", "64", "--out", str(tmp_path / "run")]) == 2
+    err = capsys.readouterr().err
+    assert "a residual over hysteresis (scale 0.1), this config a residual over lqi (scale 0.25)" in err
 
 
 def test_a_residual_config_fills_its_scale():

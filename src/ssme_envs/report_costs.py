@@ -172,8 +172,8 @@ LEARNED_SHORT: dict[tuple[str, str], str] = {
     "invisible in the return it was selected on",
     (NOZZLE, "attitude_linear"): "as on attitude: a correction of about 0.005 on a cost of 0.017",
     (NOZZLE, "sine_sweep_strong_linear"): "the residual's base, the hysteresis compensation designed "
-    "for Table 1's joint, costs 2.8x the LQ servo on a joint without hysteresis, and the residual was "
-    "trained on the hysteretic joint only",
+    "for Table 1's joint, costs over twice the LQ servo's on a joint without hysteresis, and the "
+    "residual was trained on the hysteretic joint only",
 }
 
 
