@@ -3,9 +3,10 @@ classical design, with each shipped policy's training record.
 
     python experiments/learned_vs_classical.py [--episodes 50]
 
-Evaluates the main report's controllers and scenarios (``ssme_envs.pipelines.report_plan``, with
-every shipped policy: ``ppo``, ``ppo:identified``, ``ppo:spread``, ``ppo:residual`` where the env
-has one) with the harness (seed 0, the same episodes for every controller), and writes
+Evaluates the main report's classical controllers (``ssme_envs.pipelines.report_plan``) and every
+shipped policy (``ppo``, ``ppo:identified``, ``ppo:spread``, ``ppo:residual`` where the env has
+one) on every scenario of each env (``ssme_envs.evaluation.scenario_names``) with the harness
+(seed 0, the same episodes for every controller), and writes
 experiments/results/learned_vs_classical.md. The residual policies are trained by
 ``ssme-envs train --config experiments/configs/ppo_<env>_residual.toml --out
 agents/policies/<Env>-v0-residual``.
@@ -21,7 +22,7 @@ import tomllib
 
 from agents import parse_controller
 from agents.sb3 import SHIPPED, shipped_policy
-from ssme_envs.evaluation import evaluate
+from ssme_envs.evaluation import evaluate, scenario_names
 from ssme_envs.outputs import write_text
 from ssme_envs.pipelines import report_plan
 from ssme_envs.report_costs import LEARNED_GOAL, best_of_each, learned_over_classical_tables
@@ -77,7 +78,8 @@ def main() -> None:
     parser.add_argument("--episodes", type=int, default=50)
     args = parser.parse_args()
     evaluations = {}
-    for env_id, (specs, scenarios) in report_plan(learned=True).items():
+    for env_id, (specs, _) in report_plan(learned=True).items():
+        scenarios = scenario_names(env_id)
         names = [s for s in specs if not s.startswith("ppo")] + policies_of(env_id)
         factories = {name: parse_controller(name, env_id) for name in names}
         for algo, run in tried_runs(env_id).items():
@@ -96,9 +98,9 @@ def main() -> None:
         "# Learned policies against classical designs",
         "",
         f"Command: `python experiments/learned_vs_classical.py --episodes {args.episodes}` (seed {SEED}, the "
-        "same episodes for every controller; the main report's scenarios and classical controllers, "
-        "and every shipped policy of the env; the SAC and TD3 runs tried beside PPO, not shipped, appear "
-        "in the cost tables only).",
+        "same episodes for every controller; every scenario of each env, the main report's classical "
+        "controllers and every shipped policy of the env; the SAC and TD3 runs tried beside PPO, not "
+        "shipped, appear in the cost tables only).",
         "",
         *learned_over_classical_tables(evaluations, TRIED)[2:],
         "",
