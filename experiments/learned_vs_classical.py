@@ -31,14 +31,20 @@ HERE = Path(__file__).resolve().parent
 RESULTS = HERE / "results" / "learned_vs_classical.md"
 SEED = 0
 TRIED = ("sac", "td3")  # off-policy runs tried beside PPO, not shipped: experiments/runs/<algo>_<env>/
+# each env's stem in the names of experiments/configs/*.toml
+CONFIG_STEMS = {
+    "ssme_envs/EngineTracking-v0": "engine_tracking",
+    "ssme_envs/EngineThrottle-v0": "engine_throttle",
+    "ssme_envs/NozzleTVC-v0": "nozzle_tvc",
+    "ssme_envs/LauncherPitch-v0": "launcher_pitch",
+}
 
 
 def tried_runs(env_id: str) -> dict[str, Path]:
     """``{algo: run directory}`` of the SAC and TD3 runs of an env found under experiments/runs/
     (``ssme-envs train --config experiments/configs/sac_nozzle_tvc.toml --out
     experiments/runs/sac_nozzle_tvc``)."""
-    stem = "".join("_" + c.lower() if c.isupper() else c for c in env_id.split("/")[-1][:-3]).strip("_")
-    runs = {algo: HERE / "runs" / f"{algo}_{stem}" for algo in TRIED}
+    runs = {algo: HERE / "runs" / f"{algo}_{CONFIG_STEMS[env_id]}" for algo in TRIED}
     return {algo: run for algo, run in runs.items() if (run / "training.json").exists()}
 
 
@@ -66,9 +72,10 @@ def training_rows() -> list[str]:
         summary = json.loads((folder / "training.json").read_text())
         config = tomllib.loads((folder / "config.toml").read_text())
         residual = f"{config['residual']} ({config['residual_scale']:g})" if "residual" in config else "-"
+        kept = f"{summary['kept']['steps']:,}" if "kept" in summary else "not recorded"
         rows.append(
             f"| {name} | agents/policies/{name}/config.toml | {residual} | {summary['steps']:,} | "
-            f"{summary['seconds']:.0f} | {summary['kept']['steps']:,} |"
+            f"{summary['seconds']:.0f} | {kept} |"
         )
     return rows
 
@@ -126,7 +133,7 @@ def main() -> None:
             summary = json.loads((run / "training.json").read_text())
             lines.append(
                 f"- {env_id} {algo}: experiments/configs/{run.name}.toml, {summary['steps']:,} steps in "
-                f"{summary['seconds']:.0f} s, kept at {summary['kept']['steps']:,} steps"
+                f"{summary['seconds']:.0f} s, the policy of {summary['kept']['steps']:,} steps kept"
             )
         lines.append("")
     write_text(RESULTS, "\n".join(lines))

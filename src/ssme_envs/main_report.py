@@ -5,6 +5,7 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
+from ssme_envs.evaluation import SCENARIOS
 from ssme_envs.evaluation_result import EvaluationResult
 from ssme_envs.outputs import write_text
 from ssme_envs.report_costs import (
@@ -21,31 +22,15 @@ from ssme_envs.report_costs import (
     unexplained,
 )
 
-# env -> (controllers, scenarios) that `ssme-envs report` evaluates
+# env -> the controllers `ssme-envs report` evaluates, on every scenario of the env
+REPORT_CONTROLLERS: dict[str, str] = {
+    TRACKING: "zero,pi,lqi,mpc,ppo,pi:truth,lqi:truth,mpc:truth,lq:truth,ppo:identified,ppo:residual",
+    THROTTLE: "zero,pi,pi_scheduled,scheduled,scheduled:truth,ppo,ppo:residual",
+    NOZZLE: "zero,pid,lqi,hysteresis,ppo,ppo:residual",
+    LAUNCHER: "zero,pid,lqi,robust,ppo,ppo:residual",
+}
 REPORT_PLAN: dict[str, tuple[str, list[str]]] = {
-    TRACKING: (
-        "zero,pi,lqi,mpc,ppo,pi:truth,lqi:truth,mpc:truth,lq:truth,ppo:identified,ppo:residual",
-        ["nominal", "valves", "noise", "pc_step", "mr_step", "stuck_valve"],
-    ),
-    THROTTLE: (
-        "zero,pi,pi_scheduled,scheduled,scheduled:truth,ppo,ppo:residual",
-        ["mission", "mission_linear", "mission_nonlinear"],
-    ),
-    NOZZLE: (
-        "zero,pid,lqi,hysteresis,ppo,ppo:residual",
-        [
-            "step",
-            "sine_sweep",
-            "attitude",
-            "random_steps",
-            "linear_plant",
-            "sine_sweep_linear",
-            "attitude_linear",
-            "sine_sweep_strong",
-            "sine_sweep_strong_linear",
-        ],
-    ),
-    LAUNCHER: ("zero,pid,lqi,robust,ppo,ppo:residual", ["step", "attitude", "random_steps", "linear_nozzle"]),
+    env_id: (specs, list(SCENARIOS[env_id])) for env_id, specs in REPORT_CONTROLLERS.items()
 }
 
 # env -> (controllers, scenarios) run over drawn plants (plant_spread, DEFAULT_SPREAD), PLANTS_PER_EPISODE

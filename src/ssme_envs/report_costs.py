@@ -19,8 +19,15 @@ _PI_COUPLING = (
     "its SIMC gains, tuned loop by loop on the 100 % model with the cross-coupling ignored, leave "
     "each loop alone stable at every power, but the coupled linear loop unstable at the mission's "
     "low-power levels (closed-loop spectral radius above 1 on the linked model at 90 % and below): "
-    "the oscillation grows until FPOV hits its limit, on the linear plant as on the truth; the "
-    "`scheduled` servo is the engineer's answer"
+    "the oscillation grows until FPOV hits its limit, on the linear plant as on the truth; "
+    "`pi_scheduled` (each level's gains detuned until the coupled loop is stable) and the "
+    "`scheduled` servo are the engineer's answers"
+)
+_PI_BUCKET = (
+    "at 67 % the SIMC gains, tuned loop by loop with the cross-coupling ignored, close an unstable "
+    "coupled loop (spectral radius 1.02 with the gains tuned on the identified 70 % model, 1.06 with "
+    "those tuned on the truth at 67 %): the oscillation grows until FPOV hits its limit; tuning at "
+    "the operating point does not cure it, detuning does (EngineThrottle's `pi_scheduled`)"
 )
 _STUCK_COUPLED = (
     "once OPOV sticks (at 4 s) its coupled gain still sets FPOV as if OPOV answered, so FPOV chases "
@@ -44,10 +51,12 @@ _RESIDUAL_FAULT = (
     "trained on the fault-free truth (experiments/configs/ppo_engine_tracking_residual.toml): it "
     "has never seen a stuck valve"
 )
+_MISSIONS = ("mission", "mission_noise_off", "mission_linear", "mission_nonlinear")
 # (env, scenario, controller) -> why it costs more than the zero action, found by runs of the
 # scenario (rollouts, the linear loop's eigenvalues); the measured lines come with it
 WRITTEN_CAUSES: dict[tuple[str, str, str], str] = {
-    **{(THROTTLE, s, "pi"): _PI_COUPLING for s in ("mission", "mission_linear")},
+    **{(THROTTLE, s, "pi"): _PI_COUPLING for s in _MISSIONS},
+    **{(TRACKING, s, c): _PI_BUCKET for s in ("bucket", "nonlinear_bucket") for c in ("pi", "pi:truth")},
     **{(TRACKING, "stuck_valve", c): _STUCK_COUPLED for c in ("lqi", "lqi:truth", "lq:truth")},
     **{(TRACKING, "stuck_valve", c): _PPO_FAULT for c in ("ppo", "ppo:identified")},
     (TRACKING, "stuck_valve", "ppo:residual"): _RESIDUAL_FAULT,
@@ -167,6 +176,8 @@ LEARNED_GOAL = 1.10  # the benchmark's bar: the best learned cost over the best 
 LEARNED_SHORT: dict[tuple[str, str], str] = {
     (TRACKING, "stuck_valve"): "a fault no policy was trained on (every EngineTracking config is "
     "fault-free); the residual's base, the LQ servo, is above the zero action there",
+    (TRACKING, "ramp"): "the residual (trained on random steps, whose episodes cost over 100x a "
+    "ramp's) adds about 0.01 to its base's cost of 0.01",
     (NOZZLE, "attitude"): "the residual (trained on mixed references, where an attitude episode "
     "costs about 1 % of a random-step one) adds a correction of about 0.003 to a cost of 0.02, "
     "invisible in the return it was selected on",
