@@ -53,3 +53,16 @@ def test_the_script_reproduces_the_strong_joint_figures():
     figures = _table()
     for key in ("strong_lqi_over_linear", "strong_compensation_cut"):
         assert readme_figures.FIGURES[key][1](results) == figures[key]
+
+
+def test_the_readme_counts_of_learned_within_the_bar_are_the_recorded_ones():
+    """The README's "N of M" per env and in total, against experiments/results/learned_vs_classical.md."""
+    recorded = (ROOT / "experiments" / "results" / "learned_vs_classical.md").read_text()
+    line = re.search(r"within 1\.10x the best classical design: (.*)\.", recorded)[1]
+    counts = re.findall(r"(\w+)-v0 (\d+) of (\d+)", line)
+    assert len(counts) == 4
+    readme = re.sub(r"\s+", " ", (ROOT / "README.md").read_text())
+    for env, met, total in counts:
+        assert f"{env} {met} of {total}" in readme, env
+    met, total = sum(int(c[1]) for c in counts), sum(int(c[2]) for c in counts)
+    assert f"best classical design on {met} of {total}" in readme
