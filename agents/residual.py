@@ -114,13 +114,16 @@ class ResidualController(BatchController):
         return applied_action(base, correction, self.scale).astype(np.float64)
 
 
-def residual_vec_env(venv: Any, base: Controller, scale: float) -> Any:
+def residual_vec_env(venv: Any, base: Controller, scale: float, penalty: float = 0.0) -> Any:
     """An SB3 ``VecEnv`` on which a policy learns a residual over ``base`` (module docstring).
 
     ``venv`` is an SB3 VecEnv (resets within the step, SB3's convention); the base controller is
-    reset with each sub-env's episode. An episode's terminal observation (SB3 bootstraps the value
-    of a truncated episode from it) carries the base action of the episode's last step, as the
-    base controller does not act on it.
+    reset with each sub-env's episode. ``penalty`` >= 0 takes ``penalty * |scale * correction|^2``
+    (action units) off each step's reward, so that the policy corrects its base only where that
+    pays: without it, a correction that does not matter to the return is left as it comes, and
+    on scenarios whose costs are small it shows (for training; evaluate without it). An episode's
+    terminal observation (SB3 bootstraps the value of a truncated episode from it) carries the base
+    action of the episode's last step, as the base controller does not act on it.
     """
     from stable_baselines3.common.vec_env import VecEnvWrapper
 
@@ -130,6 +133,7 @@ def residual_vec_env(venv: Any, base: Controller, scale: float) -> Any:
             n_actions = int(np.prod(venv.action_space.shape))
             super().__init__(venv, observation_space=residual_space(venv.observation_space, n_actions))
             self._base_action = np.zeros((venv.num_envs, n_actions))
+            self._cost = np.zeros(venv.num_envs)
 
         def _observe(self, obs: np.ndarray) -> np.ndarray:
             self._base_action = np.asarray(self.base.act(obs), dtype=np.float64)
@@ -141,10 +145,13 @@ def residual_vec_env(venv: Any, base: Controller, scale: float) -> Any:
             return self._observe(obs)
 
         def step_async(self, actions: np.ndarray) -> None:
+            self._cost = penalty * np.sum(np.square(self.scale * np.clip(actions, -1.0, 1.0)), axis=1)
             self.venv.step_async(applied_action(self._base_action, actions, self.scale))
 
         def step_wait(self) -> Any:
             obs, rewards, dones, infos = self.venv.step_wait()
+            if penalty:
+                rewards = rewards - self._cost.astype(rewards.dtype)
             ended = np.flatnonzero(dones)
             for i in ended.tolist():
                 last = infos[i].get("terminal_observation")

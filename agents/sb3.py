@@ -61,6 +61,7 @@ CONFIG_KEYS = {
     "init_policy": str,  # a policy directory whose weights and normalization start the training
     "residual": str,  # a classical controller of the env the policy's action is added to (agents.residual)
     "residual_scale": float,  # the residual's action scale, in (0, 2]
+    "residual_penalty": float,  # training reward minus this x |the correction|^2 (agents.residual)
 }
 DEFAULTS = {"steps": 200_000, "seed": 0, "num_envs": 64, "eval_freq": 50_000, "eval_episodes": 20,
             "tensorboard": False, "env_options": {}, "hyperparameters": {}, "policy": {}}  # fmt: skip
@@ -126,8 +127,14 @@ def check_config(config: dict[str, Any], source: str = "config") -> dict[str, An
         scale = full.get("residual_scale", RESIDUAL_SCALE)
         checked = check_residual(full["residual"], scale, full["env"], f"{source}: residual")
         full["residual_scale"] = checked.scale
-    elif "residual_scale" in full:
-        raise ValueError(f"{source}: residual_scale without residual (the base controller)")
+        penalty = full.get("residual_penalty", 0.0)
+        penalty = float(penalty) if isinstance(penalty, int) and not isinstance(penalty, bool) else penalty
+        full["residual_penalty"] = penalty
+        if not (isinstance(penalty, float) and math.isfinite(penalty) and penalty >= 0):
+            raise ValueError(f"{source}: residual_penalty must be a number >= 0, got {penalty!r}")
+    elif "residual_scale" in full or "residual_penalty" in full:
+        key = "residual_scale" if "residual_scale" in full else "residual_penalty"
+        raise ValueError(f"{source}: {key} without residual (the base controller)")
     return full
 
 
@@ -251,7 +258,7 @@ def train(config: dict[str, Any], out: Path, progress: bool = True) -> dict[str,
     options = config["env_options"]
     residual = Residual(config["residual"], config["residual_scale"]) if "residual" in config else None
 
-    def vec_env(num_envs: int, env_seed: int) -> Any:
+    def vec_env(num_envs: int, env_seed: int, penalty: float = 0.0) -> Any:
         sb3_env = make_sb3_vec_env(env_id, num_envs, env_seed, **options)
         if residual is not None:  # each vector env with its own base controller
             import gymnasium as gym
@@ -259,11 +266,13 @@ def train(config: dict[str, Any], out: Path, progress: bool = True) -> dict[str,
             design_env = gym.make(env_id, **options)
             base = base_controller(residual, design_env, env_id)
             design_env.close()
-            sb3_env = residual_vec_env(sb3_env, base, residual.scale)
+            sb3_env = residual_vec_env(sb3_env, base, residual.scale, penalty)
         return VecMonitor(sb3_env)
 
     try:
-        venv = VecNormalize(vec_env(n, seed), gamma=hyper.get("gamma", 0.99))
+        venv = VecNormalize(
+            vec_env(n, seed, config.get("residual_penalty", 0.0)), gamma=hyper.get("gamma", 0.99)
+        )
         evaluation = VecNormalize(vec_env(config["eval_episodes"], seed + 100_000), training=False,
                                   norm_reward=False)  # fmt: skip
     except TypeError as exc:  # an option the env does not take

@@ -169,6 +169,8 @@ def test_a_trained_residual_records_its_base_and_loads_with_it(tmp_path):
         ({"residual": "ppo"}, "base 'ppo' is not a classical controller"),
         ({"residual": "lqi", "residual_scale": 0.0}, r"scale must be a number in \(0, 2\]"),
         ({"residual_scale": 0.5}, "residual_scale without residual"),
+        ({"residual_penalty": 0.1}, "residual_penalty without residual"),
+        ({"residual": "lqi", "residual_penalty": -1.0}, "residual_penalty must be a number >= 0"),
         ({"policy": {"log_std_init": 9.0}}, r"log_std_init must be a number in \[-5, 2\]"),
         (
             {"algo": "td3", "policy": {"log_std_init": -2.0}},
@@ -205,3 +207,28 @@ def test_a_residual_config_fills_its_scale():
     full = check_config({"env": NOZZLE, "algo": "ppo", "residual": "lqi", "residual_scale": 1})
     assert full["residual_scale"] == 1.0 and isinstance(full["residual_scale"], float)
     assert check_config({"env": NOZZLE, "algo": "ppo", "residual": "lqi"})["residual_scale"] == 0.5
+
+
+@settings(max_examples=4, deadline=None)
+@given(seed=st.integers(0, 2**16), penalty=st.floats(0.001, 10.0), scale=st.floats(0.05, 1.0))
+def test_the_training_penalty_takes_the_squared_correction_off_the_reward(seed, penalty, scale):
+    """Two wrappers on the same episodes and corrections, with and without the penalty: the
+    rewards differ by penalty * |scale * clip(correction)|^2, step by step."""
+    env = gym.make(NOZZLE, episode_seconds=0.2)
+    plain = residual_vec_env(
+        make_sb3_vec_env(NOZZLE, 2, seed, episode_seconds=0.2), make_controller("lqi", env, NOZZLE), scale
+    )
+    taxed = residual_vec_env(
+        make_sb3_vec_env(NOZZLE, 2, seed, episode_seconds=0.2),
+        make_controller("lqi", env, NOZZLE),
+        scale,
+        penalty,
+    )
+    plain.reset(), taxed.reset()
+    rng = np.random.default_rng(seed)
+    for _ in range(40):
+        correction = rng.uniform(-1.5, 1.5, (2, 1)).astype(np.float32)
+        _, r_plain, _, _ = plain.step(correction)
+        _, r_taxed, _, _ = taxed.step(correction)
+        expected = penalty * (scale * np.clip(correction, -1, 1)[:, 0]) ** 2
+        np.testing.assert_allclose(r_plain - r_taxed, expected, rtol=1e-5, atol=1e-7)
