@@ -30,7 +30,9 @@ from ssme_envs.report_costs import LEARNED_GOAL, best_of_each, learned_over_clas
 HERE = Path(__file__).resolve().parent
 RESULTS = HERE / "results" / "learned_vs_classical.md"
 SEED = 0
-TRIED = ("sac", "td3")  # off-policy runs tried beside PPO, not shipped: experiments/runs/<algo>_<env>/
+# runs tried beside the shipped policies, not shipped: name in the tables -> experiments/runs/ folder
+# pattern (the off-policy algorithms, and the residual trained with residual_penalty = 1.0)
+TRIED = {"sac": "sac_{}", "td3": "td3_{}", "ppo:penalty": "ppo_{}_residual_penalty"}
 # each env's stem in the names of experiments/configs/*.toml
 CONFIG_STEMS = {
     "ssme_envs/EngineTracking-v0": "engine_tracking",
@@ -41,11 +43,11 @@ CONFIG_STEMS = {
 
 
 def tried_runs(env_id: str) -> dict[str, Path]:
-    """``{algo: run directory}`` of the SAC and TD3 runs of an env found under experiments/runs/
-    (``ssme-envs train --config experiments/configs/sac_nozzle_tvc.toml --out
+    """``{name: run directory}`` of the tried runs of an env found under experiments/runs/ (e.g.
+    ``ssme-envs train --config experiments/configs/sac_nozzle_tvc.toml --out
     experiments/runs/sac_nozzle_tvc``)."""
-    runs = {algo: HERE / "runs" / f"{algo}_{CONFIG_STEMS[env_id]}" for algo in TRIED}
-    return {algo: run for algo, run in runs.items() if (run / "training.json").exists()}
+    runs = {name: HERE / "runs" / folder.format(CONFIG_STEMS[env_id]) for name, folder in TRIED.items()}
+    return {name: run for name, run in runs.items() if (run / "training.json").exists()}
 
 
 def policies_of(env_id: str) -> list[str]:
@@ -89,27 +91,28 @@ def main() -> None:
         scenarios = scenario_names(env_id)
         names = [s for s in specs if not s.startswith("ppo")] + policies_of(env_id)
         factories = {name: parse_controller(name, env_id) for name in names}
-        for algo, run in tried_runs(env_id).items():
-            factories[algo] = parse_controller(f"{algo}:{run}", env_id)
-            names.append(algo)
+        for name, run in tried_runs(env_id).items():
+            factories[name] = parse_controller(f"{name.split(':')[0]}:{run}", env_id)
+            names.append(name)
         print(f"{env_id}: {', '.join(names)} on {', '.join(scenarios)}", flush=True)
         evaluations[env_id] = evaluate(env_id, factories, scenarios, args.episodes, SEED)
     met = {
-        env_id: sum(lp <= LEARNED_GOAL * lc for _, lc, _, lp in best_of_each(r, TRIED).values())
+        env_id: sum(lp <= LEARNED_GOAL * lc for _, lc, _, lp in best_of_each(r, tuple(TRIED)).values())
         for env_id, r in evaluations.items()
     }
     counts = ", ".join(
-        f"{e.split('/')[-1]} {met[e]} of {len(best_of_each(r, TRIED))}" for e, r in evaluations.items()
+        f"{e.split('/')[-1]} {met[e]} of {len(best_of_each(r, tuple(TRIED)))}" for e, r in evaluations.items()
     )
     lines = [
         "# Learned policies against classical designs",
         "",
         f"Command: `python experiments/learned_vs_classical.py --episodes {args.episodes}` (seed {SEED}, the "
         "same episodes for every controller; every scenario of each env, the main report's classical "
-        "controllers and every shipped policy of the env; the SAC and TD3 runs tried beside PPO, not "
-        "shipped, appear in the cost tables only).",
+        "controllers and every shipped policy of the env; the runs tried beside them, not shipped, "
+        "appear in the cost tables only: SAC, TD3, and `ppo:penalty`, the residual trained with "
+        "residual_penalty = 1.0).",
         "",
-        *learned_over_classical_tables(evaluations, TRIED)[2:],
+        *learned_over_classical_tables(evaluations, tuple(TRIED))[2:],
         "",
         f"Scenarios where the best learned policy is within {LEARNED_GOAL:.2f}x the best classical design: "
         f"{counts}.",
@@ -128,7 +131,7 @@ def main() -> None:
     lines += ["## Training of the shipped policies (this machine's 2 CPU cores)", "", *training_rows(), ""]
     tried = [(e, a, r) for e in evaluations for a, r in tried_runs(e).items()]
     if tried:
-        lines += ["Tried beside PPO (configs in experiments/configs/, runs in experiments/runs/):", ""]
+        lines += ["Tried, not shipped (configs in experiments/configs/, runs in experiments/runs/):", ""]
         for env_id, algo, run in tried:
             summary = json.loads((run / "training.json").read_text())
             lines.append(
