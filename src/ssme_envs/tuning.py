@@ -337,7 +337,7 @@ def tune(
     import optuna
 
     from agents.policy_files import algorithm_class
-    from agents.sb3 import DEFAULTS
+    from agents.run_config import DEFAULTS
     from ssme_envs.cli_checks import check_episodes, check_training
     from ssme_envs.evaluation import check_env_id
 
@@ -377,7 +377,7 @@ def best_config(study: Any) -> tuple[dict[str, Any], Any]:
 def write_best_config(study: Any, path: str | Path) -> Path:
     """Write the best trial's settings as a TOML config of ``ssme-envs train`` (atomically);
     its ``steps`` are the tuning budget: raise them for a full run."""
-    from agents.sb3 import _toml
+    from agents.run_config import config_toml as _toml
     from ssme_envs.outputs import write_text
 
     config, trial = best_config(study)

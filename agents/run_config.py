@@ -1,0 +1,185 @@
+"""The TOML config of a training run: its keys and defaults, the checks that name a bad key or
+value, and the steps SB3 will actually train (whole rollouts)."""
+
+from __future__ import annotations
+
+import inspect
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+from agents.policy_files import algorithm_class as _algorithm
+from agents.residual import check_residual
+
+try:
+    import tomllib
+except ModuleNotFoundError:  # Python 3.10
+    import tomli as tomllib
+
+CONFIG_KEYS = {
+    "env": str,
+    "algo": str,
+    "steps": int,
+    "seed": int,
+    "num_envs": int,
+    "eval_freq": int,
+    "eval_episodes": int,
+    "tensorboard": bool,
+    "env_options": dict,
+    "hyperparameters": dict,
+    "policy": dict,
+    "init_policy": str,  # a policy directory whose weights and normalization start the training
+    "residual": str,  # a classical controller of the env the policy's action is added to (agents.residual)
+    "residual_scale": float,  # the residual's action scale, in (0, 2]
+    "residual_penalty": float,  # training reward minus this x |the correction|^2 (agents.residual)
+}
+DEFAULTS = {"steps": 200_000, "seed": 0, "num_envs": 64, "eval_freq": 50_000, "eval_episodes": 20,
+            "tensorboard": False, "env_options": {}, "hyperparameters": {}, "policy": {}}  # fmt: skip
+RESIDUAL_SCALE = 0.5  # the residual's default action scale
+
+
+def check_config(config: dict[str, Any], source: str = "config") -> dict[str, Any]:
+    """The config with defaults filled in; ValueError naming any unknown key or wrong type."""
+    for key, value in config.items():
+        if key not in CONFIG_KEYS:
+            raise ValueError(f"{source}: unknown key {key!r}; known: {', '.join(CONFIG_KEYS)}")
+        want = CONFIG_KEYS[key]
+        if want is float and isinstance(value, int) and not isinstance(value, bool):
+            value = float(value)
+        if not isinstance(value, want) or (want is int and isinstance(value, bool)):
+            raise ValueError(f"{source}: {key} must be {want.__name__}, got {type(value).__name__}")
+    full = {**DEFAULTS, **config}
+    if "env" not in full or "algo" not in full:
+        raise ValueError(f"{source}: needs 'env' and 'algo'")
+    for key in ("steps", "num_envs", "eval_freq", "eval_episodes"):
+        if full[key] < 1:
+            raise ValueError(f"{source}: {key} must be positive, got {full[key]}")
+    algorithm = _algorithm(full["algo"])
+    signature = inspect.signature(algorithm.__init__).parameters
+    reserved = {"self", "policy", "env", "seed", "device", "verbose", "tensorboard_log", "policy_kwargs"}
+    for key, value in full["hyperparameters"].items():
+        if key not in signature or key in reserved:
+            raise ValueError(f"{source}: hyperparameters.{key} is not a {full['algo']} hyperparameter")
+        default = signature[key].default
+        if isinstance(default, bool) and not isinstance(value, bool):
+            raise ValueError(f"{source}: hyperparameters.{key} must be true or false, got {value!r}")
+        if isinstance(default, int | float) and not isinstance(default, bool):
+            if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+                raise ValueError(f"{source}: hyperparameters.{key} must be a number, got {value!r}")
+    for key, value in full["policy"].items():
+        if key == "log_std_init":  # the initial exploration noise, log of its std (PPO's Gaussian)
+            if full["algo"] != "ppo":
+                raise ValueError(
+                    f"{source}: policy.log_std_init sets PPO's initial noise, not {full['algo']}'s"
+                )
+            if isinstance(value, bool) or not isinstance(value, int | float) or not -5 <= value <= 2:
+                raise ValueError(f"{source}: policy.log_std_init must be a number in [-5, 2], got {value!r}")
+            continue
+        if key != "net_arch":
+            raise ValueError(f"{source}: unknown key policy.{key}; known: net_arch, log_std_init")
+        if not (isinstance(value, list) and value and all(isinstance(v, int) and v > 0 for v in value)):
+            raise ValueError(f"{source}: policy.net_arch must be a list of positive integers, got {value!r}")
+    if "residual" in full:
+        scale = full.get("residual_scale", RESIDUAL_SCALE)
+        checked = check_residual(full["residual"], scale, full["env"], f"{source}: residual")
+        full["residual_scale"] = checked.scale
+        penalty = full.get("residual_penalty", 0.0)
+        penalty = float(penalty) if isinstance(penalty, int) and not isinstance(penalty, bool) else penalty
+        full["residual_penalty"] = penalty
+        if not (isinstance(penalty, float) and math.isfinite(penalty) and penalty >= 0):
+            raise ValueError(f"{source}: residual_penalty must be a number >= 0, got {penalty!r}")
+    elif "residual_scale" in full or "residual_penalty" in full:
+        key = "residual_scale" if "residual_scale" in full else "residual_penalty"
+        raise ValueError(f"{source}: {key} without residual (the base controller)")
+    return full
+
+
+def load_config(path: Path) -> dict[str, Any]:
+    try:
+        data = tomllib.loads(Path(path).read_text())
+    except OSError as exc:
+        raise ValueError(f"cannot read config {path}: {exc.strerror}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ValueError(f"{path}: not valid TOML ({exc})") from None
+    return data
+
+
+def config_toml(config: dict[str, Any]) -> str:
+    """The resolved config as TOML (flat values and one level of tables)."""
+
+    def value(v: Any) -> str:
+        if isinstance(v, bool):
+            return "true" if v else "false"
+        if isinstance(v, str):
+            return json.dumps(v)
+        if isinstance(v, list):
+            return "[" + ", ".join(value(x) for x in v) + "]"
+        if isinstance(v, dict):
+            return "{" + ", ".join(f"{k} = {value(x)}" for k, x in v.items()) + "}"
+        return repr(v)
+
+    lines = [f"{k} = {value(v)}" for k, v in config.items() if not isinstance(v, dict)]
+    for key, table in config.items():
+        if isinstance(table, dict):
+            lines += ["", f"[{key}]"] + [f"{k} = {value(v)}" for k, v in table.items()]
+    return "\n".join(lines) + "\n"
+
+
+def plan_steps(config: dict[str, Any]) -> tuple[int, dict[str, Any], str | None]:
+    """The steps SB3 will train, the hyperparameters and a note when they differ from ``steps``.
+
+    SB3 trains in whole collections: PPO in rollouts of ``n_steps`` per env, SAC and TD3 in
+    ``train_freq`` steps per env. PPO's ``n_steps``, when the config does not set it, is fitted
+    (at most SB3's default 2048) so that whole rollouts come close to ``steps``; the steps are
+    then rounded up to whole collections.
+
+    Parameters
+    ----------
+    config : dict
+        A checked config (:func:`check_config`).
+
+    Returns
+    -------
+    steps, hyperparameters, note
+        The steps to train, the hyperparameters (``n_steps`` added when fitted), and a line
+        saying how the steps were rounded (None when they are the ones asked).
+    """
+    algo, asked, n = config["algo"], config["steps"], config["num_envs"]
+    hyper = dict(config["hyperparameters"])
+    defaults = inspect.signature(_algorithm(algo).__init__).parameters
+    fitted = ""
+    if algo == "ppo":
+        if "n_steps" not in hyper:
+            default = defaults["n_steps"].default
+            rollouts = math.ceil(asked / (default * n))
+            n_steps = max(math.ceil(asked / (rollouts * n)), 2 if n == 1 else 1)
+            batch = int(hyper.get("batch_size", defaults["batch_size"].default))
+            multiple = batch // math.gcd(batch, n)  # whole minibatches per rollout where it costs little
+            if n_steps >= multiple:
+                n_steps = math.ceil(n_steps / multiple) * multiple
+            hyper["n_steps"] = n_steps
+            fitted = f" (n_steps {n_steps} fitted to the steps asked; set hyperparameters.n_steps to choose)"
+        unit, what = int(hyper["n_steps"]) * n, f"rollouts of n_steps {hyper['n_steps']} x {n} envs"
+    else:
+        freq = hyper.get("train_freq", defaults["train_freq"].default)
+        if not isinstance(freq, int):
+            raise ValueError(f"hyperparameters: train_freq must be an integer number of steps, got {freq!r}")
+        unit, what = freq * n, f"collections of train_freq {freq} x {n} envs"
+    unit = max(unit, 1)  # a zero n_steps or train_freq: SB3 names it when the model is made
+    steps = math.ceil(asked / unit) * unit
+    note = None
+    if steps != asked or fitted:
+        note = f"{algo} trains in whole {what}: {steps:,} steps for the {asked:,} asked{fitted}"
+    return steps, hyper, note
+
+
+__all__ = [
+    "CONFIG_KEYS",
+    "DEFAULTS",
+    "RESIDUAL_SCALE",
+    "check_config",
+    "config_toml",
+    "load_config",
+    "plan_steps",
+]
