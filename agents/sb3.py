@@ -253,7 +253,7 @@ def load_trained(path: str | Path, algo: str | None = None, allow_pickle: bool =
 def policy_controller(loaded: LoadedPolicy, env: Any, env_id: str) -> BatchController:
     """A loaded policy as the controller of ``env``: a :class:`PolicyController`, or for a residual
     policy the :class:`~agents.residual.ResidualController` over its base designed for ``env``."""
-    controller = PolicyController(loaded, residual_ok=True)
+    controller = PolicyController(loaded)
     if loaded.residual is None:
         return controller
     from agents.base import task_of
@@ -279,38 +279,36 @@ class PolicyController(BatchController):
         The algorithm, checked against the directory's (needed for an SB3 zip).
     allow_pickle : bool
         Accept an SB3 ``.zip`` (unpickled on load: it can execute arbitrary code).
-    residual_ok : bool
-        Accept a residual policy (the learned part alone: :func:`policy_controller` pairs it with
-        its base); refused otherwise, as it cannot act without its base.
+
+    A residual policy (:mod:`agents.residual`) is the learned part alone here, acting on the env's
+    observation with its base's action appended; :func:`policy_controller` pairs it with its base.
     """
 
     name = "rl"
 
     def __init__(
-        self,
-        source: str | Path | LoadedPolicy,
-        algo: str | None = None,
-        allow_pickle: bool = False,
-        residual_ok: bool = False,
+        self, source: str | Path | LoadedPolicy, algo: str | None = None, allow_pickle: bool = False
     ) -> None:
         super().__init__()
         loaded = source if isinstance(source, LoadedPolicy) else load_trained(source, algo, allow_pickle)
-        if loaded.residual is not None and not residual_ok:
-            raise ValueError(
-                f"{loaded.source}: a residual policy over {loaded.residual.base}; load it with its base: "
-                "the controller spec ppo:RUN_DIR, or agents.sb3.policy_controller(loaded, env, env_id)"
-            )
         self.policy = loaded.policy
         self.normalization = loaded.normalization
         self.size = int(np.prod(loaded.policy.observation_space.shape))
         self.env_id = loaded.env_id or str(loaded.source)
         self.name = loaded.algo
+        self.residual = loaded.residual
 
     def compute(self, obs: np.ndarray) -> np.ndarray:
         if obs.shape[1] != self.size:
+            hint = (
+                ""
+                if self.residual is None
+                else f" (a residual policy over {self.residual.base}: its observations are the env's and the "
+                "base action; act with its base through the spec ppo:RUN_DIR or agents.sb3.policy_controller)"
+            )
             raise ValueError(
                 f"{self.name}: the policy was trained on {self.env_id} ({self.size} observations), "
-                f"got {obs.shape[1]}"
+                f"got {obs.shape[1]}{hint}"
             )
         stats = self.normalization
         normalized = obs.astype(np.float32) if stats is None else stats.normalize(obs)
