@@ -178,10 +178,10 @@ LEARNED_SHORT: dict[tuple[str, str], str] = {
     "fault-free); the residual's base, the LQ servo, is above the zero action there",
     (TRACKING, "ramp"): "the residual (trained on random steps, whose episodes cost over 100x a "
     "ramp's) adds a few thousandths to its base's cost of 0.01",
-    (NOZZLE, "attitude"): "the residual (trained on mixed references, where an attitude episode "
-    "costs about 1 % of a random-step one) adds a few thousandths to a cost of 0.02, invisible in "
-    "the return it was selected on",
-    (NOZZLE, "attitude_linear"): "as on attitude: a few thousandths on a cost of 0.017",
+    (NOZZLE, "attitude"): "the residual adds a few thousandths to a cost of 0.02 (an attitude "
+    "episode costs about 1 % of a random-step one in the mixed references it was trained on)",
+    (NOZZLE, "attitude_linear"): "on the linear joint the residual, trained on the hysteretic one, "
+    "adds a few thousandths to the LQ servo's cost of 0.017",
     (NOZZLE, "sine_sweep_strong_linear"): "the residual's base, the hysteresis compensation designed "
     "for Table 1's joint, costs over twice the LQ servo's on a joint without hysteresis, and the "
     "residual was trained on the hysteretic joint only",
