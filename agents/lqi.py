@@ -214,6 +214,21 @@ def servo_advance(
     return u
 
 
+def schedule_levels(design: str) -> np.ndarray:
+    """The power levels (%) a design scheduled in power for EngineThrottle is made at: the
+    identified models' 70-110 %, or the linked truth every 4 % over 65-109 %."""
+    levels = [70.0, 80.0, 90.0, 100.0, 110.0] if design == "identified" else list(range(65, 110, 4))
+    return np.array(levels, dtype=float)
+
+
+def schedule_weights(levels: np.ndarray, power: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Linear interpolation between the tables at ``levels``: for each power (clipped to the
+    levels' range), the lower level's index i and the weight w of level i + 1, each (N,)."""
+    p = np.clip(power, levels[0], levels[-1])
+    i = np.clip(np.searchsorted(levels, p, side="right") - 1, 0, len(levels) - 2)
+    return i, (p - levels[i]) / (levels[i + 1] - levels[i])
+
+
 class ScheduledLQI(BatchController):
     """Gain-scheduled LQ servo for EngineThrottle: servos designed at several power levels
     (the identified models at 70-110 %, or the linked truth every 4 % over 65-109 %), their
@@ -224,9 +239,8 @@ class ScheduledLQI(BatchController):
 
     def __init__(self, env: Any, design: str = "identified", integral_ratio: float = 0.02) -> None:
         super().__init__()
-        levels = [70.0, 80.0, 90.0, 100.0, 110.0] if design == "identified" else list(range(65, 110, 4))
-        self.levels = np.array(levels, dtype=float)
-        designs = [linear_design(env, design, power=level) for level in levels]
+        self.levels = schedule_levels(design)
+        designs = [linear_design(env, design, power=level) for level in self.levels.tolist()]
         self.design = designs[0]
         (self.power_reference,) = columns(task_of(env).observation, "pc_ref_pct")
         servos = [design_servo(d, integral_ratio) for d in designs]
@@ -241,9 +255,8 @@ class ScheduledLQI(BatchController):
 
     def scheduled(self, power: np.ndarray) -> Any:
         """The servo matrices at each env's power, (N, ...) each."""
-        p = np.clip(power, self.levels[0], self.levels[-1])
-        i = np.clip(np.searchsorted(self.levels, p, side="right") - 1, 0, len(self.levels) - 2)
-        w = ((p - self.levels[i]) / (self.levels[i + 1] - self.levels[i]))[:, None, None]
+        i, w = schedule_weights(self.levels, power)
+        w = w[:, None, None]
         return SimpleNamespace(**{k: (1 - w) * t[i] + w * t[i + 1] for k, t in self.tables.items()})
 
     def compute(self, obs: np.ndarray) -> np.ndarray:
@@ -263,6 +276,8 @@ __all__ = [
     "augmented",
     "design_servo",
     "reference_step",
+    "schedule_levels",
+    "schedule_weights",
     "servo_advance",
     "servo_deviation",
     "servo_estimate",

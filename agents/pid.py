@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 
 from agents.base import DEG, BatchController, by_kind, columns, task_of
+from agents.lqi import schedule_levels, schedule_weights
 from agents.plants import linear_design, second_order
 from ssme_envs.envs.launcher_pitch import LauncherTask
 from ssme_envs.envs.nozzle_tvc import NozzleTask
@@ -91,8 +92,8 @@ class ScheduledPI(DecoupledPI):
 
     def __init__(self, env: Any, design: str = "identified") -> None:
         BatchController.__init__(self)
-        levels = [70.0, 80.0, 90.0, 100.0, 110.0] if design == "identified" else list(range(65, 110, 4))
-        self.levels = np.array(levels, dtype=float)
+        self.levels = schedule_levels(design)
+        levels = self.levels.tolist()
         designs = [linear_design(env, design, power=level) for level in levels]
         self.design = designs[0]
         task = task_of(env)
@@ -113,9 +114,8 @@ class ScheduledPI(DecoupledPI):
         self.kc_table, self.ki_table = np.array(kcs), np.array(kis)
 
     def gains(self, obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        p = np.clip(100.0 + obs[:, self.power_reference], self.levels[0], self.levels[-1])
-        i = np.clip(np.searchsorted(self.levels, p, side="right") - 1, 0, len(self.levels) - 2)
-        w = ((p - self.levels[i]) / (self.levels[i + 1] - self.levels[i]))[:, None]
+        i, w = schedule_weights(self.levels, 100.0 + obs[:, self.power_reference])
+        w = w[:, None]
         return (
             (1 - w) * self.kc_table[i] + w * self.kc_table[i + 1],
             (1 - w) * self.ki_table[i] + w * self.ki_table[i + 1],

@@ -106,9 +106,6 @@ class ResidualController(BatchController):
         self.policy.reset(seed, num_envs, envs)
 
     def compute(self, obs: np.ndarray) -> np.ndarray:
-        if self.base.num_envs != len(obs):  # act() sized this controller without a reset
-            self.base.reset(num_envs=len(obs))
-            self.policy.reset(num_envs=len(obs))
         base = np.asarray(self.base.act(obs), dtype=np.float64)
         correction = self.policy.act(np.concatenate([obs, base], axis=1))
         return applied_action(base, correction, self.scale).astype(np.float64)
@@ -145,7 +142,8 @@ def residual_vec_env(venv: Any, base: Controller, scale: float, penalty: float =
             return self._observe(obs)
 
         def step_async(self, actions: np.ndarray) -> None:
-            self._cost = penalty * np.sum(np.square(self.scale * np.clip(actions, -1.0, 1.0)), axis=1)
+            if penalty:
+                self._cost = penalty * np.sum(np.square(self.scale * np.clip(actions, -1.0, 1.0)), axis=1)
             self.venv.step_async(applied_action(self._base_action, actions, self.scale))
 
         def step_wait(self) -> Any:

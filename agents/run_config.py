@@ -41,15 +41,17 @@ RESIDUAL_SCALE = 0.5  # the residual's default action scale
 
 def check_config(config: dict[str, Any], source: str = "config") -> dict[str, Any]:
     """The config with defaults filled in; ValueError naming any unknown key or wrong type."""
+    typed = {}
     for key, value in config.items():
         if key not in CONFIG_KEYS:
             raise ValueError(f"{source}: unknown key {key!r}; known: {', '.join(CONFIG_KEYS)}")
         want = CONFIG_KEYS[key]
         if want is float and isinstance(value, int) and not isinstance(value, bool):
-            value = float(value)
+            value = float(value)  # TOML writes 1 for 1.0
         if not isinstance(value, want) or (want is int and isinstance(value, bool)):
             raise ValueError(f"{source}: {key} must be {want.__name__}, got {type(value).__name__}")
-    full = {**DEFAULTS, **config}
+        typed[key] = value
+    full = {**DEFAULTS, **typed}
     if "env" not in full or "algo" not in full:
         raise ValueError(f"{source}: needs 'env' and 'algo'")
     for key in ("steps", "num_envs", "eval_freq", "eval_episodes"):
@@ -84,10 +86,8 @@ def check_config(config: dict[str, Any], source: str = "config") -> dict[str, An
         scale = full.get("residual_scale", RESIDUAL_SCALE)
         checked = check_residual(full["residual"], scale, full["env"], f"{source}: residual")
         full["residual_scale"] = checked.scale
-        penalty = full.get("residual_penalty", 0.0)
-        penalty = float(penalty) if isinstance(penalty, int) and not isinstance(penalty, bool) else penalty
-        full["residual_penalty"] = penalty
-        if not (isinstance(penalty, float) and math.isfinite(penalty) and penalty >= 0):
+        penalty = full.setdefault("residual_penalty", 0.0)
+        if not (math.isfinite(penalty) and penalty >= 0):
             raise ValueError(f"{source}: residual_penalty must be a number >= 0, got {penalty!r}")
     elif "residual_scale" in full or "residual_penalty" in full:
         key = "residual_scale" if "residual_scale" in full else "residual_penalty"

@@ -316,6 +316,19 @@ class PolicyController(BatchController):
         return np.asarray(action, dtype=np.float64)
 
 
+def shipped_specs(env_id: str) -> dict[str, Path]:
+    """``{controller spec: directory}`` of the policies shipped for an env: ``ppo`` (trained on its
+    truth) and ``ppo:VARIANT`` for each other (``identified``, ``spread``, ``residual``)."""
+    name = env_id.split("/")[-1]
+    specs = {}
+    for shipped in SHIPPED:
+        if shipped == name or shipped.startswith(name + "-"):
+            variant = shipped.removeprefix(name).removeprefix("-") or "truth"
+            spec = "ppo" if variant == "truth" else f"ppo:{variant}"
+            specs[spec] = shipped_policy(env_id, variant)
+    return specs
+
+
 def shipped_policy(env_id: str, trained_on: str = "truth") -> Path:
     """The directory of the policy shipped for an env, trained on its truth or its identified model."""
     name = env_id.split("/")[-1] + ("" if trained_on == "truth" else f"-{trained_on}")
@@ -334,6 +347,7 @@ __all__ = [
     "plan_steps",
     "policy_controller",
     "shipped_policy",
+    "shipped_specs",
     "to_vec_normalize",
     "train",
 ]

@@ -21,7 +21,7 @@ from pathlib import Path
 import tomllib
 
 from agents import parse_controller
-from agents.sb3 import SHIPPED, shipped_policy
+from agents.sb3 import shipped_specs
 from ssme_envs.evaluation import evaluate, scenario_names
 from ssme_envs.outputs import write_text
 from ssme_envs.pipelines import report_plan
@@ -50,35 +50,22 @@ def tried_runs(env_id: str) -> dict[str, Path]:
     return {name: run for name, run in runs.items() if (run / "training.json").exists()}
 
 
-def policies_of(env_id: str) -> list[str]:
-    """The shipped policies of an env as controller specs."""
-    name = env_id.split("/")[-1]
-    specs = []
-    for shipped in SHIPPED:
-        if shipped == name:
-            specs.append("ppo")
-        elif shipped.startswith(name + "-"):
-            specs.append("ppo:" + shipped.removeprefix(name + "-"))
-    return specs
-
-
 def training_rows() -> list[str]:
     rows = [
         "| policy | config | residual base (scale) | steps | wall-clock s | kept at |",
         "|---|---|---|---|---|---|",
     ]
-    for name in SHIPPED:
-        env_name, _, variant = name.partition("-v0")
-        env_id, trained_on = f"ssme_envs/{env_name}-v0", variant.removeprefix("-") or "truth"
-        folder = shipped_policy(env_id, trained_on)
-        summary = json.loads((folder / "training.json").read_text())
-        config = tomllib.loads((folder / "config.toml").read_text())
-        residual = f"{config['residual']} ({config['residual_scale']:g})" if "residual" in config else "-"
-        kept = f"{summary['kept']['steps']:,}" if "kept" in summary else "not recorded"
-        rows.append(
-            f"| {name} | agents/policies/{name}/config.toml | {residual} | {summary['steps']:,} | "
-            f"{summary['seconds']:.0f} | {kept} |"
-        )
+    for env_id in CONFIG_STEMS:
+        for folder in shipped_specs(env_id).values():
+            name = folder.name
+            summary = json.loads((folder / "training.json").read_text())
+            config = tomllib.loads((folder / "config.toml").read_text())
+            residual = f"{config['residual']} ({config['residual_scale']:g})" if "residual" in config else "-"
+            kept = f"{summary['kept']['steps']:,}" if "kept" in summary else "not recorded"
+            rows.append(
+                f"| {name} | agents/policies/{name}/config.toml | {residual} | {summary['steps']:,} | "
+                f"{summary['seconds']:.0f} | {kept} |"
+            )
     return rows
 
 
@@ -89,7 +76,7 @@ def main() -> None:
     evaluations = {}
     for env_id, (specs, _) in report_plan(learned=True).items():
         scenarios = scenario_names(env_id)
-        names = [s for s in specs if not s.startswith("ppo")] + policies_of(env_id)
+        names = [s for s in specs if not s.startswith("ppo")] + list(shipped_specs(env_id))
         factories = {name: parse_controller(name, env_id) for name in names}
         for name, run in tried_runs(env_id).items():
             factories[name] = parse_controller(f"{name.split(':')[0]}:{run}", env_id)

@@ -48,6 +48,11 @@ def _ratio(value: float) -> str:
     return f"{value:.2f}x" if value < 2 else f"{value:.1f}x"
 
 
+def _cost_over(env_id: str, scenario: str, name: str, reference: str) -> Callable[[dict], str]:
+    """The figure "cost of ``name`` over the cost of ``reference``" on one scenario of one env."""
+    return lambda e: _ratio(_cost(e[env_id], scenario, name) / _cost(e[env_id], scenario, reference))
+
+
 # figure -> (what it is, how it reads in the README from the evaluations)
 FIGURES: dict[str, tuple[str, Callable[[dict[str, EvaluationResult]], str]]] = {
     "strong_lqi_over_linear": (
@@ -62,49 +67,39 @@ FIGURES: dict[str, tuple[str, Callable[[dict[str, EvaluationResult]], str]]] = {
     ),
     "tracking_ppo_over_lqi_nominal": (
         "EngineTracking nominal: PPO cost over the LQ servo's",
-        lambda e: _ratio(_cost(e[TRACKING], "nominal", "ppo") / _cost(e[TRACKING], "nominal", "lqi")),
+        _cost_over(TRACKING, "nominal", "ppo", "lqi"),
     ),
     "tracking_ppo_over_lq_truth_nominal": (
         "EngineTracking nominal: PPO cost over the LQ-optimal tracker's on the true linear model",
-        lambda e: _ratio(_cost(e[TRACKING], "nominal", "ppo") / _cost(e[TRACKING], "nominal", "lq:truth")),
+        _cost_over(TRACKING, "nominal", "ppo", "lq:truth"),
     ),
     "tracking_ppo_over_lqi_noise": (
         "EngineTracking full truth (valves, noise): PPO cost over the LQ servo's",
-        lambda e: _ratio(_cost(e[TRACKING], "noise", "ppo") / _cost(e[TRACKING], "noise", "lqi")),
+        _cost_over(TRACKING, "noise", "ppo", "lqi"),
     ),
     "throttle_ppo_over_scheduled": (
         "EngineThrottle mission: PPO cost over the scheduled servo's",
-        lambda e: _ratio(_cost(e[THROTTLE], "mission", "ppo") / _cost(e[THROTTLE], "mission", "scheduled")),
+        _cost_over(THROTTLE, "mission", "ppo", "scheduled"),
     ),
     "tracking_residual_over_lq_truth_nominal": (
         "EngineTracking nominal: residual PPO (over the LQ servo) over the LQ-optimal tracker on the truth",
-        lambda e: _ratio(
-            _cost(e[TRACKING], "nominal", "ppo:residual") / _cost(e[TRACKING], "nominal", "lq:truth")
-        ),
+        _cost_over(TRACKING, "nominal", "ppo:residual", "lq:truth"),
     ),
     "throttle_residual_over_scheduled": (
         "EngineThrottle mission: residual PPO (over the scheduled servo) cost over the scheduled servo's",
-        lambda e: _ratio(
-            _cost(e[THROTTLE], "mission", "ppo:residual") / _cost(e[THROTTLE], "mission", "scheduled")
-        ),
+        _cost_over(THROTTLE, "mission", "ppo:residual", "scheduled"),
     ),
     "throttle_residual_over_scheduled_nonlinear": (
         "EngineThrottle mission on the nonlinear engine: residual PPO cost over the scheduled servo's",
-        lambda e: _ratio(
-            _cost(e[THROTTLE], "mission_nonlinear", "ppo:residual")
-            / _cost(e[THROTTLE], "mission_nonlinear", "scheduled")
-        ),
+        _cost_over(THROTTLE, "mission_nonlinear", "ppo:residual", "scheduled"),
     ),
     "nozzle_residual_over_hysteresis_strong": (
         "NozzleTVC strong joint, sine sweep: residual PPO (over the compensated servo) cost over its base's",
-        lambda e: _ratio(
-            _cost(e[NOZZLE], "sine_sweep_strong", "ppo:residual")
-            / _cost(e[NOZZLE], "sine_sweep_strong", "hysteresis")
-        ),
+        _cost_over(NOZZLE, "sine_sweep_strong", "ppo:residual", "hysteresis"),
     ),
     "nozzle_ppo_over_lqi": (
         "NozzleTVC random steps: PPO cost over the LQ servo's",
-        lambda e: _ratio(_cost(e[NOZZLE], "random_steps", "ppo") / _cost(e[NOZZLE], "random_steps", "lqi")),
+        _cost_over(NOZZLE, "random_steps", "ppo", "lqi"),
     ),
 }
 

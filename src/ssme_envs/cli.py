@@ -266,17 +266,15 @@ def build_parser() -> argparse.ArgumentParser:
 def _evaluate_choices() -> str:
     """The envs, their scenarios and controllers, from where they are defined (evaluate --help)."""
     from agents import controller_names
-    from agents.sb3 import SHIPPED
+    from agents.sb3 import shipped_specs
     from ssme_envs.evaluation import SCENARIOS
 
     lines = ["envs, their scenarios (default: all) and controllers (default: all; NAME:truth designs on"]
     lines += ["the env's own plant instead of the identified model; ppo:VARIANT the other shipped policies):"]
     for env_id, scenarios in SCENARIOS.items():
         lines.append(f"  {env_id}")
-        prefix = env_id.split("/")[-1] + "-"
-        variants = [f"ppo:{name.removeprefix(prefix)}" for name in SHIPPED if name.startswith(prefix)]
         listed = (("scenarios", list(scenarios)), ("controllers", controller_names(env_id)))
-        for label, names in (*listed, ("shipped policies", ["ppo", *variants])):
+        for label, names in (*listed, ("shipped policies", list(shipped_specs(env_id)))):
             text = f"{label}: {', '.join(names)}"
             lines += textwrap.wrap(text, 96, initial_indent="    ", subsequent_indent="      ")
     return "\n".join(lines)

@@ -223,16 +223,14 @@ def learned_over_classical_tables(
         "| env | scenario | best classical | cost | best learned | cost | learned / classical |",
         "|---|---|---|---|---|---|---|",
     ]
+    above = []
     for env_id, results in evaluations.items():
         for scenario, (c, lc, p, lp) in best_of_each(results, skip).items():
-            flag = "" if lp <= LEARNED_GOAL * lc else " (above the bar)"
+            flag = ""
+            if lp > LEARNED_GOAL * lc:
+                flag = " (above the bar)"
+                above.append((env_id, scenario))
             lines.append(f"| {env_id} | {scenario} | {c} | {lc:.3f} | {p} | {lp:.3f} | {lp / lc:.2f}{flag} |")
-    above = [
-        (env_id, scenario)
-        for env_id, results in evaluations.items()
-        for scenario, (_, lc, _, lp) in best_of_each(results, skip).items()
-        if lp > LEARNED_GOAL * lc
-    ]
     if above:
         lines.append("")
         for env_id, scenario in above:
