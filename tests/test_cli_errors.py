@@ -492,3 +492,19 @@ def test_train_counts_beyond_memory_are_refused_before_work(tmp_path, capsys, co
     err = capsys.readouterr().err
     assert err.startswith(f"error: {option} ") and "of memory" in err and err.count("\n") == 1
     assert not out.exists()
+
+
+def test_ctrl_c_inside_an_import_exits_130_not_a_traceback(monkeypatch, capsys):
+    """A C extension's module init turns a Ctrl-C into ImportError("initialization failed") with the
+    KeyboardInterrupt as its cause (seen importing matplotlib under load): still an interrupt."""
+    import ssme_envs.cli as cli
+
+    def interrupted_import(args):
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as exc:
+            raise ImportError("initialization failed") from exc
+
+    monkeypatch.setattr(cli, "_dispatch", interrupted_import)
+    assert cli.main(["report", "--out", "x"]) == 130
+    assert capsys.readouterr().err == "error: interrupted (Ctrl-C)\n"

@@ -369,6 +369,18 @@ def _dispatch(args: argparse.Namespace) -> int:
     raise _UsageError(f"unknown command {args.command}")  # pragma: no cover
 
 
+def _interrupted(exc: BaseException) -> bool:
+    """Whether a KeyboardInterrupt caused ``exc`` (along its chain of causes and contexts)."""
+    seen: set[int] = set()
+    cause: BaseException | None = exc
+    while cause is not None and id(cause) not in seen:
+        if isinstance(cause, KeyboardInterrupt):
+            return True
+        seen.add(id(cause))
+        cause = cause.__cause__ or cause.__context__
+    return False
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point; returns the process exit code: 0, 2 for an error (one line ``error: ...`` on
     stderr, no traceback), 130 when interrupted (Ctrl-C)."""
@@ -382,6 +394,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         print("error: interrupted (Ctrl-C)", file=sys.stderr)
         return 130
     except Exception as exc:
+        if _interrupted(exc):  # Ctrl-C inside a C extension's import comes back as its ImportError
+            print("error: interrupted (Ctrl-C)", file=sys.stderr)
+            return 130
         text = error_line(exc)
         if text is None:  # a bug: keep its traceback
             raise
