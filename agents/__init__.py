@@ -73,8 +73,9 @@ def _shipped_ppo(env: Any, design: str) -> Controller:
 
 # shipped policies trained on other than the identified model or the truth: ``ppo:spread``, trained
 # with the plant drawn per episode (plant_spread=0.2); ``ppo:residual``, a correction learned on top
-# of a classical design's action (agents.residual)
-POLICY_VARIANTS = ("spread", "residual")
+# of a classical design's action (agents.residual); ``ppo:residual_quiet``, one trained with its
+# correction penalized (residual_penalty)
+POLICY_VARIANTS = ("spread", "residual", "residual_quiet")
 # name -> (factory(env, design), the env ids it serves, the design model when none is named)
 CONTROLLERS: dict[str, tuple[Callable[[Any, str], Controller], tuple[str, ...], str]] = {
     "zero": (ZeroAction, tuple(ENVS), "identified"),  # the baseline of every env

@@ -56,6 +56,7 @@ SHIPPED = (
     "LauncherPitch-v0",
     # residual policies over a classical design (agents.residual; experiments/configs/*_residual.toml)
     "EngineTracking-v0-residual",
+    "EngineTracking-v0-residual_quiet",  # with residual_penalty = 1.0: its correction kept small
     "EngineThrottle-v0-residual",
     "NozzleTVC-v0-residual",
     "LauncherPitch-v0-residual",

@@ -31,7 +31,7 @@ HERE = Path(__file__).resolve().parent
 RESULTS = HERE / "results" / "learned_vs_classical.md"
 SEED = 0
 # runs tried beside the shipped policies, not shipped: name in the tables -> experiments/runs/ folder
-# pattern (the off-policy algorithms, and the residual trained with residual_penalty = 1.0)
+# pattern (the off-policy algorithms, and NozzleTVC's residual trained with residual_penalty = 1.0)
 TRIED = {"sac": "sac_{}", "td3": "td3_{}", "ppo:penalty": "ppo_{}_residual_penalty"}
 # each env's stem in the names of experiments/configs/*.toml
 CONFIG_STEMS = {
@@ -96,7 +96,7 @@ def main() -> None:
         f"Command: `python experiments/learned_vs_classical.py --episodes {args.episodes}` (seed {SEED}, the "
         "same episodes for every controller; every scenario of each env, the main report's classical "
         "controllers and every shipped policy of the env; the runs tried beside them, not shipped, "
-        "appear in the cost tables only: SAC, TD3, and `ppo:penalty`, the residual trained with "
+        "appear in the cost tables only: SAC, TD3, and `ppo:penalty`, NozzleTVC's residual trained with "
         "residual_penalty = 1.0).",
         "",
         *learned_over_classical_tables(evaluations, tuple(TRIED))[2:],

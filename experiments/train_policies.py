@@ -13,7 +13,8 @@ experiments/launcher_rl.py, which appends the LauncherPitch section.
 
     python experiments/train_policies.py [--evaluate-only] [config names ...]
 
---evaluate-only re-evaluates the runs already in experiments/runs/ without training.
+--evaluate-only re-evaluates the runs already in experiments/runs/ without training (a shipped
+policy's copy in agents/policies/ where its run is not there).
 """
 
 from __future__ import annotations
@@ -37,6 +38,7 @@ SHIP = {
     "ppo_launcher_pitch": "LauncherPitch-v0",
     # residual policies over a classical design (agents/residual.py)
     "ppo_engine_tracking_residual": "EngineTracking-v0-residual",
+    "ppo_engine_tracking_residual_quiet": "EngineTracking-v0-residual_quiet",
     "ppo_engine_throttle_residual": "EngineThrottle-v0-residual",
     "ppo_nozzle_tvc_residual": "NozzleTVC-v0-residual",
     "ppo_launcher_pitch_residual": "LauncherPitch-v0-residual",
@@ -52,6 +54,7 @@ PLANT = {
     "ppo_nozzle_tvc_spread": ("random_steps", "step", "sine_sweep", "attitude"),
     "ppo_launcher_pitch": ("random_steps", "step", "attitude", "linear_nozzle"),
     "ppo_engine_tracking_residual": ("noise", "pc_step", "mr_step"),
+    "ppo_engine_tracking_residual_quiet": ("noise", "pc_step", "ramp"),
     "ppo_engine_throttle_residual": ("mission", "mission_nonlinear"),
     "ppo_nozzle_tvc_residual": ("random_steps", "step", "sine_sweep", "attitude", "sine_sweep_strong"),
     "ppo_launcher_pitch_residual": ("random_steps", "step", "attitude", "linear_nozzle"),
@@ -85,6 +88,8 @@ def main(names: list[str], evaluate_only: bool = False) -> None:
     for name in names:
         config = load_config(HERE / "configs" / f"{name}.toml")
         out = HERE / "runs" / name
+        if evaluate_only and not out.exists() and name in SHIP:  # a fresh clone: runs/ is not shipped
+            out = HERE.parent / "agents" / "policies" / SHIP[name]
         if evaluate_only:
             summary = json.loads((out / "training.json").read_text())
         else:

@@ -24,7 +24,8 @@ from ssme_envs.report_costs import (
 
 # env -> the controllers `ssme-envs report` evaluates, on every scenario of the env
 REPORT_CONTROLLERS: dict[str, str] = {
-    TRACKING: "zero,pi,lqi,mpc,ppo,pi:truth,lqi:truth,mpc:truth,lq:truth,ppo:identified,ppo:residual",
+    TRACKING: "zero,pi,lqi,mpc,ppo,pi:truth,lqi:truth,mpc:truth,lq:truth,ppo:identified,ppo:residual,"
+    "ppo:residual_quiet",
     THROTTLE: "zero,pi,pi_scheduled,scheduled,scheduled:truth,ppo,ppo:residual",
     NOZZLE: "zero,pid,lqi,hysteresis,ppo,ppo:residual",
     LAUNCHER: "zero,pid,lqi,robust,ppo,ppo:residual",
