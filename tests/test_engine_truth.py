@@ -86,3 +86,34 @@ def test_bad_commands_and_config():
         simulate(model, np.full((10, 2), np.nan), TruthConfig.ideal())
     with pytest.raises(ValueError, match="backlash"):
         TruthConfig(backlash=-1.0)
+
+
+@pytest.mark.parametrize("power", [70, 80, 90, 100.0])
+def test_truth_plant_at_a_level_is_the_linked_model_there(power):
+    """The env's plant "truth" at a Table I level (taken without the interpolators) equals the
+    linked model's local model there, to the bit."""
+    from ssme_envs.envs.engine_task import resolve_plant
+    from ssme_envs.models.linked import LinkedEngineModel
+
+    plant, linked = resolve_plant("truth", power), LinkedEngineModel().local_model(power)
+    for name in ("A", "B", "C", "lam"):
+        assert np.array_equal(getattr(plant, name), getattr(linked, name)), name
+    assert plant.dt == linked.dt and plant.observability_indices == linked.observability_indices
+    with pytest.raises(ValueError, match="within 65-109"):
+        resolve_plant("truth", 110)
+
+
+def test_making_the_default_env_imports_no_heavy_scipy_module():
+    """``import ssme_envs`` and a first ``gymnasium.make`` of EngineTracking leave
+    scipy.interpolate, scipy.signal and scipy.linalg unimported (a fresh interpreter)."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, gymnasium as gym, ssme_envs\n"
+        "gym.make('ssme_envs/EngineTracking-v0').reset(seed=0)\n"
+        "heavy = ('scipy.interpolate', 'scipy.signal', 'scipy.linalg')\n"
+        "print(' '.join(m for m in heavy if m in sys.modules))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == ""

@@ -27,6 +27,7 @@ from ssme_envs.models.engine import (
     identified_model,
     output_coupling,
     pair_rows,
+    published_model,
     step_arrays,
     valves_pair_floats,
 )
@@ -86,6 +87,10 @@ def resolve_plant(plant: str | Path | AlphaCanonicalModel, power: float) -> Alph
     if isinstance(plant, AlphaCanonicalModel):
         return plant
     if plant == "truth":
+        if power in POWER_LEVELS and LinkedEngineModel.check_power(power) == power:
+            # the linked model's local model there, to the bit, without building its
+            # interpolators (scipy.interpolate: a quarter of a second on the first make)
+            return published_model(int(power))
         return LinkedEngineModel().local_model(power)
     if plant == "identified":
         if power not in POWER_LEVELS:

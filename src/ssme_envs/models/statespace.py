@@ -39,7 +39,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import scipy.linalg
 
 from ssme_envs.models.linear import Dimensions, StateSpace, as_matrix, check_dt
 from ssme_envs.models.statespace_json import dumps_compact, read_json
@@ -221,6 +220,8 @@ class AlphaCanonicalModel(Dimensions):
         h = self.H
         if np.array_equal(h, np.eye(h.shape[0])):
             return last.copy()
+        import scipy.linalg  # here: importing it costs about a tenth of a second, first make included
+
         return scipy.linalg.solve_triangular(h, last.T, trans="T", lower=True, unit_diagonal=True).T
 
     def parameter_names(self) -> list[str]:
