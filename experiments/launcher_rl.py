@@ -1,10 +1,12 @@
-"""The shipped LauncherPitch policy beside the classical controllers: its training record and an
-evaluation on every scenario of the env, as ``ssme-envs evaluate --env ssme_envs/LauncherPitch-v0
---controllers zero,pid,lqi,robust,ppo --episodes 20`` (seed 0) measures it.
+"""The shipped LauncherPitch policies beside the classical controllers: the PPO policy's training
+record and an evaluation on every scenario of the env of it and of the residual policy, as
+``ssme-envs evaluate --env ssme_envs/LauncherPitch-v0 --controllers
+zero,pid,lqi,robust,ppo,ppo:residual --episodes 20`` (seed 0) measures them.
 
     python experiments/launcher_rl.py
 
-Reads agents/policies/LauncherPitch-v0/ (config.toml, training.json and the policy), and the
+Reads agents/policies/LauncherPitch-v0/ (config.toml, training.json and the policy) and
+agents/policies/LauncherPitch-v0-residual/ (the policy and its base), and the
 SAC and TD3 runs tried beside it where experiments/runs/<config name>/ holds them (``ssme-envs
 train --config experiments/configs/sac_launcher_pitch.toml --out
 experiments/runs/sac_launcher_pitch``, not shipped), and writes its section, "## LauncherPitch-v0",

@@ -4,12 +4,14 @@ classical design, with each shipped policy's training record.
     python experiments/learned_vs_classical.py [--episodes 50]
 
 Evaluates the main report's classical controllers (``ssme_envs.pipelines.report_plan``) and every
-shipped policy (``ppo``, ``ppo:identified``, ``ppo:spread``, ``ppo:residual`` where the env has
-one) on every scenario of each env (``ssme_envs.evaluation.scenario_names``) with the harness
-(seed 0, the same episodes for every controller), and writes
+shipped policy (``ppo``, ``ppo:identified``, ``ppo:spread``, ``ppo:residual``,
+``ppo:residual_quiet`` where the env has one) on every scenario of each env
+(``ssme_envs.evaluation.scenario_names``) with the harness (seed 0, the same episodes for every
+controller), and writes
 experiments/results/learned_vs_classical.md. The residual policies are trained by
 ``ssme-envs train --config experiments/configs/ppo_<env>_residual.toml --out
-agents/policies/<Env>-v0-residual``.
+agents/policies/<Env>-v0-residual`` (EngineTracking's quiet one from
+``ppo_engine_tracking_residual_quiet.toml`` into ``EngineTracking-v0-residual_quiet``).
 """
 
 from __future__ import annotations

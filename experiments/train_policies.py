@@ -7,8 +7,9 @@ copied into agents/policies/<name>/. Every run is then
 evaluated by the harness beside the LQ servo (or the scheduled one) on the plant it was trained
 for and on the full truth. The policy trained on EngineTracking's identified model is shipped too
 (the sim-to-real comparison), NozzleTVC's fine-tuned on drawn plants (after the nominal one,
-which it starts from), and the residual policies over a classical design (``*_residual``: the
-"PPO cost" column is the residual policy's with its base). Writes experiments/results/rl_training.md; then run
+which it starts from), and the residual policies over a classical design (``*_residual``, and
+EngineTracking's ``*_residual_quiet``, trained with its correction penalized: the "PPO cost"
+column is the residual policy's with its base). Writes experiments/results/rl_training.md; then run
 experiments/launcher_rl.py, which appends the LauncherPitch section.
 
     python experiments/train_policies.py [--evaluate-only] [config names ...]

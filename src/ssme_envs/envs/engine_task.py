@@ -87,9 +87,10 @@ def resolve_plant(plant: str | Path | AlphaCanonicalModel, power: float) -> Alph
     if isinstance(plant, AlphaCanonicalModel):
         return plant
     if plant == "truth":
+        # at a Table I level, Table I's model is the linked model's local model there, to the
+        # bit, without building its interpolators (scipy.interpolate: a quarter of a second on
+        # the first make); check_power keeps 110 %, a level outside the linked range, an error
         if power in POWER_LEVELS and LinkedEngineModel.check_power(power) == power:
-            # the linked model's local model there, to the bit, without building its
-            # interpolators (scipy.interpolate: a quarter of a second on the first make)
             return published_model(int(power))
         return LinkedEngineModel().local_model(power)
     if plant == "identified":
