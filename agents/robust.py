@@ -57,6 +57,29 @@ def design_task(task: Any, source: str) -> Any:
 _TUNED: dict[str, tuple[float, float, float]] = {}  # by the ensemble's repr: one tuning per design
 
 
+class _Candidates(BatchController):
+    """Candidate servos side by side: candidate k acts on envs [k block, (k + 1) block)."""
+
+    name = "robust candidates"
+
+    def __init__(self, servos: list[BatchController], block: int) -> None:
+        super().__init__()
+        self.servos, self.block = servos, block
+
+    def reset(self, seed: int | None = None, num_envs: int = 1, envs: np.ndarray | None = None) -> None:
+        if envs is not None:
+            raise ValueError(f"{self.name}: every episode starts together (no reset of some envs)")
+        if num_envs != self.block * len(self.servos):
+            raise ValueError(f"{self.name}: {len(self.servos)} blocks of {self.block} envs, got {num_envs}")
+        super().reset(seed, num_envs)
+        for servo in self.servos:
+            servo.reset(seed, self.block)
+
+    def compute(self, obs: np.ndarray) -> np.ndarray:
+        b = self.block
+        return np.concatenate([servo.act(obs[k * b : (k + 1) * b]) for k, servo in enumerate(self.servos)])
+
+
 def _tuned(task: Any, source: str) -> tuple[float, float, float]:
     """(rate factor, process ratio, CVaR) of the best candidate on the design ensemble."""
     from ssme_envs.envs.vector import TrackingVectorEnv
@@ -66,14 +89,25 @@ def _tuned(task: Any, source: str) -> tuple[float, float, float]:
     key = repr(ensemble)
     if key in _TUNED:
         return _TUNED[key]
-    best = (np.inf, 1.0, 10.0)
-    for factor, process in itertools.product(RATE_FACTORS, PROCESS_RATIOS):
-        env = type("Ensemble", (TrackingVectorEnv,), {"build_task": staticmethod(lambda: ensemble)})(
-            DESIGN_PLANTS
-        )
-        controller = RobustLQI(env, source, factor, process)
-        score = cvar(episode_costs(rollout(env, controller, "robust", DESIGN_SEED)))
-        best = min(best, (score, factor, process))
+    candidates = list(itertools.product(RATE_FACTORS, PROCESS_RATIOS))
+
+    class Ensemble(TrackingVectorEnv):
+        """The ensemble once per candidate, in one vector env (one step for all of them): env j
+        runs episode j mod DESIGN_PLANTS of the ensemble (its seed: seed + j mod DESIGN_PLANTS),
+        so that every candidate meets the same plants and episodes as on an env of its own."""
+
+        build_task = staticmethod(lambda: ensemble)
+
+        def reset(self, *, seed: Any = None, options: Any = None) -> Any:
+            if isinstance(seed, int):
+                seed = [seed + j % DESIGN_PLANTS for j in range(self.num_envs)]
+            return super().reset(seed=seed, options=options)
+
+    env = Ensemble(DESIGN_PLANTS * len(candidates))
+    servos = [RobustLQI(env, source, factor, process) for factor, process in candidates]
+    costs = episode_costs(rollout(env, _Candidates(servos, DESIGN_PLANTS), "robust", DESIGN_SEED))
+    scores = [cvar(block) for block in costs.reshape(len(candidates), DESIGN_PLANTS)]
+    best = min((score, *candidate) for score, candidate in zip(scores, candidates, strict=True))
     _TUNED[key] = best[1], best[2], best[0]
     return _TUNED[key]
 

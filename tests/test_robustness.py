@@ -92,3 +92,30 @@ def test_the_robust_family_holds_the_nominal_servo_and_tunes_on_the_design_model
     design = identified_nozzle("table1").plant().normalized()
     np.testing.assert_allclose(ensemble.spread.mean, list(design.values()), rtol=1e-15)
     assert ensemble.plant != env.unwrapped.task.plant
+
+
+def test_tuning_all_candidates_in_one_env_scores_each_as_on_an_env_of_its_own(monkeypatch):
+    """The robust servo's tuning runs every candidate in one vector env; each candidate's CVaR
+    equals the one of its own rollout on an env of the ensemble alone (the same seeds), to the bit,
+    and the tuned candidate is the one of least CVaR."""
+    import itertools
+
+    import agents.robust as robust
+    from ssme_envs.envs.vector import TrackingVectorEnv
+    from ssme_envs.evaluation import rollout
+    from ssme_envs.robustness import cvar, episode_costs
+
+    monkeypatch.setattr(robust, "DESIGN_PLANTS", 12)
+    monkeypatch.setattr(robust, "RATE_FACTORS", (0.5, 1.0, 4.0))
+    monkeypatch.setattr(robust, "_TUNED", {})
+    task = gym.make(NOZZLE, reference="step").unwrapped.task
+    ensemble = design_task(task, "identified")
+    alone = type("Alone", (TrackingVectorEnv,), {"build_task": staticmethod(lambda: ensemble)})
+    scores = {}
+    for factor, process in itertools.product(robust.RATE_FACTORS, robust.PROCESS_RATIOS):
+        env = alone(12)
+        servo = RobustLQI(env, "identified", factor, process)
+        scores[factor, process] = cvar(episode_costs(rollout(env, servo, "robust", robust.DESIGN_SEED)))
+    assert len(set(scores.values())) > 1  # the candidates differ, so the choice means something
+    factor, process, score = robust._tuned(task, "identified")
+    assert score == scores[factor, process] == min(scores.values())
