@@ -19,6 +19,7 @@ from agents.mpc import MPC
 from agents.pid import DecoupledPI, PlacedPID, ScheduledPI
 from agents.plants import DESIGN_SOURCES
 from agents.policy_files import ALGOS
+from agents.shipped import POLICY_VARIANTS
 from agents.tvc import HysteresisCompensated
 from ssme_envs.envs.catalogue import ENVS
 
@@ -71,11 +72,6 @@ def _shipped_ppo(env: Any, design: str) -> Controller:
     return policy_controller(load_trained(shipped_policy(env_id, design)), env, env_id)
 
 
-# shipped policies trained on other than the identified model or the truth: ``ppo:spread``, trained
-# with the plant drawn per episode (plant_spread=0.2); ``ppo:residual``, a correction learned on top
-# of a classical design's action (agents.residual); ``ppo:residual_quiet``, one trained with its
-# correction penalized (residual_penalty)
-POLICY_VARIANTS = ("spread", "residual", "residual_quiet")
 # name -> (factory(env, design), the env ids it serves, the design model when none is named)
 CONTROLLERS: dict[str, tuple[Callable[[Any, str], Controller], tuple[str, ...], str]] = {
     "zero": (ZeroAction, tuple(ENVS), "identified"),  # the baseline of every env

@@ -229,6 +229,18 @@ def schedule_weights(levels: np.ndarray, power: np.ndarray) -> tuple[np.ndarray,
     return i, (p - levels[i]) / (levels[i + 1] - levels[i])
 
 
+def scheduled_tables(
+    levels: np.ndarray, tables: dict[str, np.ndarray], power: np.ndarray
+) -> dict[str, np.ndarray]:
+    """Each table (one row per level, any shape after) interpolated at each power, (N, ...)."""
+    i, w = schedule_weights(levels, power)
+    out = {}
+    for key, table in tables.items():
+        wk = w.reshape(-1, *(1,) * (table.ndim - 1))
+        out[key] = (1 - wk) * table[i] + wk * table[i + 1]
+    return out
+
+
 class ScheduledLQI(BatchController):
     """Gain-scheduled LQ servo for EngineThrottle: servos designed at several power levels
     (the identified models at 70-110 %, or the linked truth every 4 % over 65-109 %), their
@@ -255,9 +267,7 @@ class ScheduledLQI(BatchController):
 
     def scheduled(self, power: np.ndarray) -> Any:
         """The servo matrices at each env's power, (N, ...) each."""
-        i, w = schedule_weights(self.levels, power)
-        w = w[:, None, None]
-        return SimpleNamespace(**{k: (1 - w) * t[i] + w * t[i + 1] for k, t in self.tables.items()})
+        return SimpleNamespace(**scheduled_tables(self.levels, self.tables, power))
 
     def compute(self, obs: np.ndarray) -> np.ndarray:
         y, r = self.design.ports.read(obs)
@@ -278,6 +288,7 @@ __all__ = [
     "reference_step",
     "schedule_levels",
     "schedule_weights",
+    "scheduled_tables",
     "servo_advance",
     "servo_deviation",
     "servo_estimate",

@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 
 from agents.base import DEG, BatchController, by_kind, columns, task_of
-from agents.lqi import schedule_levels, schedule_weights
+from agents.lqi import schedule_levels, scheduled_tables
 from agents.plants import linear_design, second_order
 from ssme_envs.envs.launcher_pitch import LauncherTask
 from ssme_envs.envs.nozzle_tvc import NozzleTask
@@ -111,15 +111,11 @@ class ScheduledPI(DecoupledPI):
             kcs.append(factor * kc)
             kis.append(factor * ki)
             self.detune.append(factor)
-        self.kc_table, self.ki_table = np.array(kcs), np.array(kis)
+        self.tables = {"kc": np.array(kcs), "ki": np.array(kis)}
 
     def gains(self, obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        i, w = schedule_weights(self.levels, 100.0 + obs[:, self.power_reference])
-        w = w[:, None]
-        return (
-            (1 - w) * self.kc_table[i] + w * self.kc_table[i + 1],
-            (1 - w) * self.ki_table[i] + w * self.ki_table[i + 1],
-        )
+        gains = scheduled_tables(self.levels, self.tables, 100.0 + obs[:, self.power_reference])
+        return gains["kc"], gains["ki"]
 
 
 def placed_pid(

@@ -45,22 +45,7 @@ from agents.run_config import (  # the config's checks live there; re-exported f
     load_config,
     plan_steps,
 )
-
-# the shipped policies: trained on each env's full truth, and on EngineTracking's identified model
-SHIPPED = (
-    "EngineTracking-v0",
-    "EngineTracking-v0-identified",
-    "EngineThrottle-v0",
-    "NozzleTVC-v0",
-    "NozzleTVC-v0-spread",  # trained with plant_spread=0.2 (experiments/configs/ppo_nozzle_tvc_spread.toml)
-    "LauncherPitch-v0",
-    # residual policies over a classical design (agents.residual; experiments/configs/*_residual.toml)
-    "EngineTracking-v0-residual",
-    "EngineTracking-v0-residual_quiet",  # with residual_penalty = 1.0: its correction kept small
-    "EngineThrottle-v0-residual",
-    "NozzleTVC-v0-residual",
-    "LauncherPitch-v0-residual",
-)
+from agents.shipped import SHIPPED, env_and_variant
 
 
 def train(config: dict[str, Any], out: Path, progress: bool = True) -> dict[str, Any]:
@@ -319,14 +304,12 @@ class PolicyController(BatchController):
 
 def shipped_specs(env_id: str) -> dict[str, Path]:
     """``{controller spec: directory}`` of the policies shipped for an env: ``ppo`` (trained on its
-    truth) and ``ppo:VARIANT`` for each other (``identified``, ``spread``, ``residual``)."""
-    name = env_id.split("/")[-1]
+    truth) and ``ppo:VARIANT`` for each other (``identified``, ``spread``, ``residual``, ...)."""
     specs = {}
     for shipped in SHIPPED:
-        if shipped == name or shipped.startswith(name + "-"):
-            variant = shipped.removeprefix(name).removeprefix("-") or "truth"
-            spec = "ppo" if variant == "truth" else f"ppo:{variant}"
-            specs[spec] = shipped_policy(env_id, variant)
+        env, variant = env_and_variant(shipped)
+        if env == env_id:
+            specs["ppo" if variant == "truth" else f"ppo:{variant}"] = shipped_policy(env_id, variant)
     return specs
 
 

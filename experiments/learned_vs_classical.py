@@ -85,12 +85,10 @@ def main() -> None:
             names.append(name)
         print(f"{env_id}: {', '.join(names)} on {', '.join(scenarios)}", flush=True)
         evaluations[env_id] = evaluate(env_id, factories, scenarios, args.episodes, SEED)
-    met = {
-        env_id: sum(lp <= LEARNED_GOAL * lc for _, lc, _, lp in best_of_each(r, tuple(TRIED)).values())
-        for env_id, r in evaluations.items()
-    }
+    bests = {env_id: best_of_each(r, tuple(TRIED)) for env_id, r in evaluations.items()}
     counts = ", ".join(
-        f"{e.split('/')[-1]} {met[e]} of {len(best_of_each(r, tuple(TRIED)))}" for e, r in evaluations.items()
+        f"{e.split('/')[-1]} {sum(lp <= LEARNED_GOAL * lc for _, lc, _, lp in b.values())} of {len(b)}"
+        for e, b in bests.items()
     )
     lines = [
         "# Learned policies against classical designs",
