@@ -476,6 +476,35 @@ def test_ctrl_c_exits_130_with_one_line_and_leaves_the_earlier_run(tmp_path, ear
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "r.csv"]
 
 
+INTERRUPTED_IN_EXEC = """
+import runpy, sys
+from contextlib import contextmanager
+import ssme_envs.cli_checks as checks
+
+@contextmanager
+def interrupted():
+    exec("raise KeyboardInterrupt")  # lands inside an exec of a string, as in making a dataclass
+    yield
+
+checks.sigint_in_main_process = interrupted
+sys.argv = ["ssme-envs", "identify", "engine", "--out", sys.argv[1]]
+runpy.run_module("ssme_envs.cli", run_name="__main__", alter_sys=True)
+"""
+
+
+def test_ctrl_c_through_an_exec_of_a_string_still_exits_130_under_python_m(tmp_path):
+    """CPython's ``python -m`` ends a process by SIGINT (return code -2) once a KeyboardInterrupt has
+    passed through an exec of a string, even a caught one; the CLI exits 130 all the same."""
+    (tmp_path / "interrupted_in_exec.py").write_text(INTERRUPTED_IN_EXEC)
+    proc = subprocess.run(
+        [sys.executable, "-m", "interrupted_in_exec", str(tmp_path / "out")],
+        capture_output=True, text=True, timeout=120, check=False, cwd=tmp_path,
+    )  # fmt: skip
+    assert proc.returncode == 130, proc.stderr
+    assert proc.stderr == "error: interrupted (Ctrl-C)\n"
+    assert not (tmp_path / "out").exists()
+
+
 @pytest.mark.parametrize(
     ("config", "algo", "option"),
     [

@@ -16,11 +16,13 @@ only once the run has succeeded (see :mod:`ssme_envs.outputs`).
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import textwrap
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import NoReturn
 
 from ssme_envs.cli_checks import (
     check_count,
@@ -404,5 +406,17 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
 
 
+def _exit(status: int) -> NoReturn:
+    """Exit with ``status``. After Ctrl-C, exit 130 at once (streams flushed; the run's own
+    cleanup has already run): under ``python -m``, CPython ends a process by SIGINT once a
+    KeyboardInterrupt has passed through an ``exec`` or ``eval`` of a string (dataclasses and
+    namedtuples are made so), even one caught long before."""
+    if status == 130:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(130)
+    raise SystemExit(status)
+
+
 if __name__ == "__main__":
-    raise SystemExit(main())
+    _exit(main())
