@@ -20,6 +20,7 @@ import numpy as np
 import pytest
 
 import ssme_envs.cli as cli
+import ssme_envs.cli_commands as cli_commands
 from ssme_envs.cli import main
 from ssme_envs.identification import pipeline
 from ssme_envs.identification.pipeline import default_experiment, write_record
@@ -79,7 +80,7 @@ def _raise_in_identification(exc):
 
 
 def _let_gymnasium_see_the_seed(monkeypatch):
-    monkeypatch.setattr(cli, "check_seed", lambda seed: None)  # the CLI's own check, bypassed
+    monkeypatch.setattr(cli_commands, "check_seed", lambda seed: None)  # the CLI's own check, bypassed
 
 
 ENGINE = ["identify", "engine", "--data", "{d}/r.csv", "--out", "{d}/out"]

@@ -17,7 +17,7 @@ from gymnasium.vector import AutoresetMode
 import ssme_envs  # noqa: F401  (registers the environments)
 from ssme_envs.envs.task import FLOATS
 from ssme_envs.models import NonlinearEngine, TruthConfig, published_model, simulate_nonlinear
-from ssme_envs.models.engine import valves_arrays
+from ssme_envs.models.engine_step import valves_arrays
 
 TRACKING, THROTTLE = "ssme_envs/EngineTracking-v0", "ssme_envs/EngineThrottle-v0"
 SHORT_PROFILE = [(0.0, 100.0), (3.0, 100.0), (6.0, 80.0), (10.0, 80.0)]  # 250 steps

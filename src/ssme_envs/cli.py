@@ -19,27 +19,21 @@ import argparse
 import os
 import sys
 import textwrap
-import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import NoReturn
 
-from ssme_envs.cli_checks import (
-    check_count,
-    check_seed,
-    check_vector_sizes,
-    error_line,
-    one_line,
-    positive_integers,
-    sigint_in_main_process,
-)
+from ssme_envs.cli_checks import error_line, one_line, sigint_in_main_process
+from ssme_envs.cli_commands import UsageError as _UsageError
+from ssme_envs.cli_commands import bench_command as _bench
+from ssme_envs.cli_commands import evaluate_choices as _evaluate_choices
+from ssme_envs.cli_commands import evaluate_command as _evaluate
+from ssme_envs.cli_commands import report_command as _report
 from ssme_envs.cli_identify import identify_engine as _identify_engine
 from ssme_envs.cli_identify import identify_nozzle as _identify_nozzle
-from ssme_envs.cli_identify import names as _names
-from ssme_envs.cli_identify import noting_replacement
 from ssme_envs.cli_identify import validate_engine as _validate_engine
 from ssme_envs.cli_learn import add_learning_commands, train_command, tune_command
-from ssme_envs.outputs import run_directory, write_text
+from ssme_envs.outputs import run_directory
 
 OUTPUT_NOTE = (
     "--out is built in a fresh directory beside it and swapped in when the run succeeds: an earlier "
@@ -47,12 +41,6 @@ OUTPUT_NOTE = (
     "holding other files is refused, and a second run into the same --out at the same time is "
     "refused (lock file .NAME.lock beside it)."
 )
-
-
-class _UsageError(Exception):
-    def __init__(self, message: str, usage: str = "") -> None:
-        super().__init__(message)
-        self.usage = usage  # printed before the error line (a command given without a subcommand)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -263,93 +251,6 @@ def build_parser() -> argparse.ArgumentParser:
         sub = commands.choices[action.dest]
         sub.description = sub.description or action.help
     return parser
-
-
-def _evaluate_choices() -> str:
-    """The envs, their scenarios and controllers, from where they are defined (evaluate --help)."""
-    from agents import controller_names
-    from agents.sb3 import shipped_specs
-    from ssme_envs.evaluation import SCENARIOS
-
-    lines = ["envs, their scenarios (default: all) and controllers (default: all; NAME:truth designs on"]
-    lines += ["the env's own plant instead of the identified model; ppo:VARIANT the other shipped policies):"]
-    for env_id, scenarios in SCENARIOS.items():
-        lines.append(f"  {env_id}")
-        listed = (("scenarios", list(scenarios)), ("controllers", controller_names(env_id)))
-        for label, names in (*listed, ("shipped policies", list(shipped_specs(env_id)))):
-            text = f"{label}: {', '.join(names)}"
-            lines += textwrap.wrap(text, 96, initial_indent="    ", subsequent_indent="      ")
-    return "\n".join(lines)
-
-
-def _bench(args: argparse.Namespace) -> int:
-    from ssme_envs.bench import ACTIONS, ENV_IDS, format_table, run_benchmark
-
-    try:
-        sizes = list(positive_integers("--sizes", args.sizes))
-    except ValueError as exc:
-        raise _UsageError(str(exc)) from None
-    if not 1 <= args.rounds <= 100:
-        raise _UsageError(f"--rounds must be within 1-100, got {args.rounds}")
-    env_ids = args.env or list(ENV_IDS)
-    unknown = [e for e in env_ids if e not in ENV_IDS]
-    if unknown:
-        raise _UsageError(f"unknown env {', '.join(unknown)}; choose from {', '.join(ENV_IDS)}")
-    check_vector_sizes(sizes, env_ids)
-    if args.out is not None and (args.out.is_dir() or not args.out.parent.is_dir()):
-        raise ValueError(f"--out {args.out}: must be a file in an existing directory")
-    actions = args.actions.split(",")
-    if not actions or any(kind not in ACTIONS for kind in actions):
-        raise _UsageError(f"--actions must be among {', '.join(ACTIONS)}, got {args.actions!r}")
-    rows = run_benchmark(env_ids, sizes, args.rounds, progress=_to_stderr, actions=actions)
-    table = format_table(rows)
-    print(table)
-    if args.out is not None:
-        write_text(args.out, "Command: `ssme-envs bench`\n\n" + table + "\n")
-    return 0
-
-
-def _evaluate(args: argparse.Namespace) -> int:
-    from ssme_envs.evaluation import check_env_id
-    from ssme_envs.pipelines import evaluate_to
-    from ssme_envs.robustness import DEFAULT_SPREAD
-
-    env_id = check_env_id(args.env)
-    check_seed(args.seed)
-    scenarios = None if args.scenario is None else _names(args.scenario, "--scenario")
-    controllers = None if args.controllers is None else _names(args.controllers, "--controllers")
-    command = "ssme-envs " + " ".join(sys.argv[1:]) if sys.argv[1:2] == ["evaluate"] else "ssme-envs evaluate"
-    robust = {}
-    if args.monte_carlo is not None:
-        if args.episodes is not None:
-            raise ValueError("give --episodes or --monte-carlo N (N plants, one per episode), not both")
-        check_count("--monte-carlo", args.monte_carlo)
-        robust = {"monte_carlo": args.monte_carlo, "plant_spread": args.plant_spread or DEFAULT_SPREAD}
-    elif args.plant_spread is not None:
-        raise ValueError("--plant-spread applies with --monte-carlo N")
-    episodes = 20 if args.episodes is None else args.episodes
-    with noting_replacement(args.out):
-        evaluate_to(
-            args.out, env_id, controllers, scenarios, episodes, args.seed,
-            allow_pickle=args.allow_pickle, command=command, progress=_to_stderr, **robust,
-        )  # fmt: skip
-    extra = f", {args.out / 'robustness.md'}" if robust else ""
-    print(f"wrote {args.out / 'results.md'}, {args.out / 'results.json'}{extra} and the plots")
-    return 0
-
-
-def _report(args: argparse.Namespace) -> int:
-    from ssme_envs.pipelines import run_report
-
-    start = time.perf_counter()
-    with noting_replacement(args.out):
-        path = run_report(args.out, args.episodes, progress=_to_stderr)
-    print(f"report: {path} ({time.perf_counter() - start:.0f} s)")
-    return 0
-
-
-def _to_stderr(message: str) -> None:
-    print(message, file=sys.stderr)
 
 
 def _dispatch(args: argparse.Namespace) -> int:

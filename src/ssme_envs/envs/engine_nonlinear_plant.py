@@ -26,7 +26,6 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 import numpy as np
 
 from ssme_envs.envs.task import CLIP_UFUNC, Carrier, Value
-from ssme_envs.models.engine import dynamics_arrays, valves_arrays, valves_pair_floats
 from ssme_envs.models.engine_nonlinear import (
     FLOW_AMPLITUDE,
     GRID_STEP,
@@ -34,6 +33,7 @@ from ssme_envs.models.engine_nonlinear import (
     SCHEDULE_RANGE,
     NonlinearEngine,
 )
+from ssme_envs.models.engine_step import dynamics_arrays, valves_arrays, valves_pair_floats
 
 if TYPE_CHECKING:
     from ssme_envs.envs.engine_task import EngineTask

@@ -9,6 +9,7 @@ from typing import Any, ClassVar, NamedTuple
 
 import numpy as np
 
+from ssme_envs.envs.engine_models import design_model, resolve_plant, resolve_truth
 from ssme_envs.envs.engine_nonlinear_plant import NonlinearPlantCore, nonlinear_engine_of, nonlinear_task
 from ssme_envs.envs.references import (
     Fault,
@@ -18,20 +19,15 @@ from ssme_envs.envs.references import (
     uniforms_needed,
 )
 from ssme_envs.envs.task import Carrier, Observation, Schedule, Value
-from ssme_envs.models.engine import (
-    POWER_LEVELS,
+from ssme_envs.models.engine import TruthConfig, check_stable_plant, output_coupling
+from ssme_envs.models.engine_nonlinear import NonlinearEngine
+from ssme_envs.models.engine_step import (
     StepParameters,
-    TruthConfig,
-    check_stable_plant,
     dynamics_pair_floats,
-    identified_model,
-    output_coupling,
     pair_rows,
-    published_model,
     step_arrays,
     valves_pair_floats,
 )
-from ssme_envs.models.engine_nonlinear import NonlinearEngine
 from ssme_envs.models.linked import LinkedEngineModel
 from ssme_envs.models.statespace import AlphaCanonicalModel
 
@@ -60,59 +56,6 @@ class EngineState(NamedTuple):
     integral: tuple[Value, Value]
     prev: tuple[Value, Value]
     held: Value
-
-
-def resolve_truth(truth: TruthConfig | Mapping[str, Any] | None) -> TruthConfig:
-    """A TruthConfig from one, from a dict of its fields, or the default."""
-    if truth is None:
-        return TruthConfig()
-    if isinstance(truth, TruthConfig):
-        return truth
-    if isinstance(truth, Mapping):
-        unknown = sorted(set(truth) - set(TruthConfig.__dataclass_fields__))
-        if unknown:
-            raise ValueError(f"truth: unknown option(s) {', '.join(unknown)}")
-        return TruthConfig(**truth)
-    raise ValueError(f"truth must be a TruthConfig or a dict, got {type(truth).__name__}")
-
-
-def resolve_plant(plant: str | Path | AlphaCanonicalModel, power: float) -> AlphaCanonicalModel:
-    """The engine model behind an environment.
-
-    ``"truth"``: the linked published model at ``power`` (Table I itself at 70-100 %);
-    ``"identified"``: the packaged design model identified at ``power`` (70, 80, 90, 100, 110 %);
-    a path to an engine model.json; or a model object. (``"nonlinear"``, the nonlinear engine,
-    is no linear model: :meth:`EngineTask.build` takes it.)
-    """
-    if isinstance(plant, AlphaCanonicalModel):
-        return plant
-    if plant == "truth":
-        # at a Table I level, Table I's model is the linked model's local model there, to the
-        # bit, without building its interpolators (scipy.interpolate: a quarter of a second on
-        # the first make); check_power keeps 110 %, a level outside the linked range, an error
-        if power in POWER_LEVELS and LinkedEngineModel.check_power(power) == power:
-            return published_model(int(power))
-        return LinkedEngineModel().local_model(power)
-    if plant == "identified":
-        if power not in POWER_LEVELS:
-            raise ValueError(f"plant='identified' exists at power {list(POWER_LEVELS)} %, got {power!r}")
-        return identified_model(int(power))
-    if isinstance(plant, str | Path) and str(plant).endswith(".json"):
-        return AlphaCanonicalModel.load(plant)
-    raise ValueError(
-        f"plant must be 'truth', 'identified', 'nonlinear', a model.json path or a model, got {plant!r}"
-    )
-
-
-def design_model(power: float, source: str = "identified") -> AlphaCanonicalModel:
-    """The linear engine model a controller is designed on at ``power`` % (lambda and the valve
-    effects left out): ``"identified"``, the packaged design model identified at the Table I
-    level nearest to ``power``, or ``"truth"``, the published (linked) model at ``power``."""
-    if source == "truth":
-        return LinkedEngineModel().local_model(power)
-    if source == "identified":
-        return identified_model(int(min(POWER_LEVELS, key=lambda level: abs(level - power))))
-    raise ValueError(f"design model source must be 'identified' or 'truth', got {source!r}")
 
 
 @dataclass(frozen=True)
@@ -416,4 +359,12 @@ class EngineTask:
         return [obs[0] / 100.0, obs[1] / 100.0, *ref, valve[0], valve[1]]
 
 
-__all__ = ["ENGINE_OBSERVATION", "EnginePlant", "EngineState", "EngineTask", "design_model"]
+__all__ = [
+    "ENGINE_OBSERVATION",
+    "EnginePlant",
+    "EngineState",
+    "EngineTask",
+    "design_model",
+    "resolve_plant",
+    "resolve_truth",
+]

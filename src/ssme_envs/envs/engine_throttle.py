@@ -14,16 +14,15 @@ from ssme_envs.envs.engine_task import EnginePlant, EngineTask, resolve_truth
 from ssme_envs.envs.engine_tracking import EngineTrackingEnv
 from ssme_envs.envs.references import Fault
 from ssme_envs.envs.task import Carrier, Schedule, Value
-from ssme_envs.models.engine import (
-    ENGINE_DT,
-    TruthConfig,
+from ssme_envs.models.engine import ENGINE_DT, TruthConfig
+from ssme_envs.models.engine_nonlinear import NonlinearEngine
+from ssme_envs.models.engine_step import (
     dynamics_arrays,
     dynamics_pair_floats,
     pair_rows,
     valves_arrays,
     valves_pair_floats,
 )
-from ssme_envs.models.engine_nonlinear import NonlinearEngine
 from ssme_envs.models.linked import POWER_RANGE, LinkedEngineModel
 
 # The mission profile of the paper's figure 2, compressed in time (the flight spends about

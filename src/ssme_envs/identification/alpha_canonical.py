@@ -34,31 +34,26 @@ Any number of inputs and outputs and any observability indices. The steps:
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.linalg
 
+from ssme_envs.identification.alpha_fit import _binary_amplitudes, _Fit, _fit, _input_features
 from ssme_envs.identification.covariance import parameter_uncertainty
-from ssme_envs.identification.output_error import held_out_criterion, linear_response, refine_contenders
+from ssme_envs.identification.output_error import held_out_criterion, refine_contenders
 from ssme_envs.identification.structure import (
     DEFAULT_MAX_INDEX,
     DEFAULT_RANK_TOL,
     Candidate,
     StructureSearch,
     explore,
-    lagged,
 )
 from ssme_envs.identification.structure import estimate_indices as structure_search
-from ssme_envs.models.engine import TruthConfig, simulate
 from ssme_envs.models.statespace import AlphaCanonicalModel, AlphaStructure, check_dt
 
 # Share of the record the candidate structures are fitted on; the rest scores them.
 ESTIMATION_SHARE = 2 / 3
-IV_PASSES = 2
-# Simulated outputs beyond this cannot serve as instruments (their squares overflow).
-OVERFLOW_GUARD = 1e100
 
 
 @dataclass
@@ -120,40 +115,6 @@ def check_record(
     return u, y
 
 
-def _binary_amplitudes(u: np.ndarray, names: Sequence[str] | None = None) -> np.ndarray:
-    """Per input: the constant |u| of a symmetric binary (PRBS-like) input, or NaN if |u| varies.
-
-    Raises
-    ------
-    ValueError
-        For an input that switches between two levels of different magnitude: its |u| is an
-        affine function of u, so lambda cannot be told apart from B and an offset.
-    """
-    mag = np.abs(u)
-    out = np.full(u.shape[1], np.nan)
-    for j in range(u.shape[1]):
-        top = mag[:, j].max()
-        if top > 0 and mag[:, j].min() >= top * (1 - 1e-9):
-            out[j] = mag[:, j].mean()
-            continue
-        levels = np.unique(u[:, j])
-        if levels.size == 2:
-            name = names[j] if names is not None else f"u{j}"
-            raise ValueError(
-                f"input '{name}' switches between two levels of different magnitude ({levels[0]:g}, "
-                f"{levels[1]:g}): lambda cannot be identified from it; use a PRBS symmetric about 0, or "
-                "identify without the asymmetric gains (--symmetric)"
-            )
-    return out
-
-
-def _input_features(u: np.ndarray, gamma: np.ndarray, asymmetric: bool) -> np.ndarray:
-    """Inputs plus |u| of the non-binary inputs (their asymmetric part)."""
-    if not asymmetric:
-        return u
-    return np.hstack([u, np.abs(u[:, np.isnan(gamma)])])
-
-
 def estimate_indices(
     u: np.ndarray,
     y: np.ndarray,
@@ -178,128 +139,6 @@ def estimate_indices(
     """
     gamma = _binary_amplitudes(u, input_names) if asymmetric else np.full(u.shape[1], np.nan)
     return structure_search(_input_features(u, gamma, asymmetric), y, max_index, rank_tol, output_names)
-
-
-def _regressors(
-    structure: AlphaStructure, output: int, y: np.ndarray, feats: np.ndarray, start: int
-) -> np.ndarray:
-    """phi_i(k) of eq 11 for k = start..T-1: free output lags, the coupled outputs' current
-    samples (free H entries), input-feature lags, a constant."""
-    mu_i = structure.indices[output]
-    horizon = y.shape[0]
-    y_cols = [y[start - 1 - d : horizon - 1 - d, j] for j, d in structure.free_output_lags(output)]
-    y_cols += [y[start:, j] for j in structure.coupled_outputs(output)]
-    u_cols = lagged(feats, range(1, mu_i + 1), start)
-    return np.column_stack([*y_cols, u_cols, np.ones(horizon - start)])
-
-
-def _simulation_error(
-    model: AlphaCanonicalModel, u: np.ndarray, y: np.ndarray
-) -> tuple[float, np.ndarray | None]:
-    """Sum of squared simulation errors (eqs 51-52) and the simulated outputs; (inf, None) for
-    an unstable model."""
-    if model.spectral_radius() >= 1.0:
-        return float("inf"), None
-    simulated = linear_response(model, u)
-    return float(np.sum((y - simulated) ** 2)), simulated
-
-
-@dataclass
-class _Fit:
-    """One structure fitted: the model and what its covariance needs."""
-
-    model: AlphaCanonicalModel
-    thetas: list[np.ndarray]
-    phis: list[np.ndarray]
-    instruments: list[np.ndarray]
-    intercept: np.ndarray
-    simulated: np.ndarray | None
-    start: int
-    build: Callable[[list[np.ndarray]], tuple[AlphaCanonicalModel, np.ndarray]]
-
-    def residuals(self, y: np.ndarray) -> list[np.ndarray]:
-        """Equation errors ``y_i - phi_i theta_i`` of each output's regression."""
-        pairs = zip(self.phis, self.thetas, strict=True)
-        return [y[self.start :, i] - phi @ theta for i, (phi, theta) in enumerate(pairs)]
-
-
-def _fit(
-    structure: AlphaStructure,
-    u: np.ndarray,
-    y: np.ndarray,
-    dt: float,
-    method: str,
-    asymmetric: bool,
-    names: tuple[tuple[str, ...], tuple[str, ...]],
-) -> _Fit:
-    """Least squares (eq 27), then for ``method="iv"`` up to two instrumental-variable passes."""
-    in_names, out_names = names
-    m, p = u.shape[1], y.shape[1]
-    if structure.n_outputs != p:
-        raise ValueError(f"{len(structure.indices)} observability indices given for {p} outputs")
-    gamma = _binary_amplitudes(u, in_names) if asymmetric else np.full(m, np.nan)
-    feats = _input_features(u, gamma, asymmetric)
-    start = max(structure.indices)
-    phis = [_regressors(structure, i, y, feats, start) for i in range(p)]
-    n_params = max(phi.shape[1] for phi in phis)
-    if u.shape[0] - start < 2 * n_params:
-        raise ValueError(
-            f"the record has {u.shape[0]} samples; observability indices {list(structure.indices)} "
-            f"need at least {start + 2 * n_params}"
-        )
-    thetas = []
-    for i, phi in enumerate(phis):
-        theta, _, rank, _ = np.linalg.lstsq(phi, y[start:, i], rcond=None)
-        if rank < phi.shape[1]:
-            raise ValueError(
-                f"the regression for output '{out_names[i]}' is rank-deficient ({rank} of "
-                f"{phi.shape[1]}): the record does not determine indices {list(structure.indices)}"
-            )
-        thetas.append(theta)
-
-    def build(thetas: list[np.ndarray]) -> tuple[AlphaCanonicalModel, np.ndarray]:
-        a, b, c, lam, intercept = _realize(structure, thetas, m, gamma, asymmetric, out_names)
-        model = AlphaCanonicalModel(
-            A=a,
-            B=b,
-            C=c,
-            dt=dt,
-            observability_indices=structure.indices,
-            lam=lam,
-            input_names=in_names,
-            output_names=out_names,
-            fit={"method": method, "samples": int(u.shape[0])},
-        )
-        return model, intercept
-
-    model, intercept = build(thetas)
-    best, simulated = _simulation_error(model, u, y)
-    fit = _Fit(model, thetas, phis, phis, intercept, simulated, start, build)
-    if method == "iv":
-        # Each pass takes the previous model's simulated output as instruments; a pass is kept
-        # only if its model is stable and simulates the record at least as well (weak
-        # instruments can otherwise throw the estimate away from the least-squares one).
-        for _ in range(IV_PASSES):
-            source = fit.simulated
-            if source is None:  # an unstable start still gives instruments, unless it overflows
-                with np.errstate(over="ignore", invalid="ignore"):
-                    source = simulate(fit.model, u, TruthConfig.ideal())[1]
-                if not np.all(np.isfinite(source)) or np.max(np.abs(source)) > OVERFLOW_GUARD:
-                    break
-            instruments = [_regressors(structure, i, source, feats, start) for i in range(p)]
-            # (Z^T Phi) theta = Z^T y, solved through Z's orthonormal basis Q (Z = Q R): the
-            # same estimate, without squaring Phi's condition number.
-            thetas = []
-            for i, (z, phi) in enumerate(zip(instruments, phis, strict=True)):
-                q = np.linalg.qr(z)[0]
-                thetas.append(np.linalg.lstsq(q.T @ phi, q.T @ y[start:, i], rcond=None)[0])
-            candidate, intercept = build(thetas)
-            error, candidate_simulated = _simulation_error(candidate, u, y)
-            if not error <= best:
-                break
-            best = error
-            fit = _Fit(candidate, thetas, phis, instruments, intercept, candidate_simulated, start, build)
-    return fit
 
 
 def identify(
@@ -399,59 +238,3 @@ def identify(
     if uncertainty:
         fit.model.uncertainty = parameter_uncertainty(fit, y, method)
     return Identification(fit.model, search, fit.intercept, method)
-
-
-def _realize(
-    structure: AlphaStructure,
-    thetas: list[np.ndarray],
-    m: int,
-    gamma: np.ndarray,
-    asymmetric: bool,
-    output_names: Sequence[str],
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """(A, B, C, lambda, unexplained intercept) from the per-output regression coefficients."""
-    n, p = structure.n_states, structure.n_outputs
-    k_gain = np.zeros((n, p))
-    coupling = np.zeros((p, p))  # y_i(k) = sum_j coupling[i, j] y_j(k) + ...: H = (I - coupling)^-1
-    b = np.zeros((n, m))
-    asym = np.zeros((n, m))  # coefficients of |u| lags (non-binary inputs only)
-    nonbinary = np.flatnonzero(np.isnan(gamma)) if asymmetric else np.empty(0, dtype=int)
-    n_feat = m + nonbinary.size
-    intercept = np.empty(p)
-    for i, theta in enumerate(thetas):
-        free = structure.free_output_lags(i)
-        coupled = structure.coupled_outputs(i)
-        for (j, d), value in zip(free, theta[: len(free)], strict=True):
-            k_gain[structure.position(i, d), j] = value
-        coupling[i, coupled] = theta[len(free) : len(free) + len(coupled)]
-        u_coef = theta[len(free) + len(coupled) : -1].reshape(structure.indices[i], n_feat)
-        for d in range(structure.indices[i]):
-            row = structure.position(i, d)
-            b[row] = u_coef[d, :m]
-            asym[row, nonbinary] = u_coef[d, m:]
-        intercept[i] = theta[-1]
-    eye = np.eye(p)
-    h = eye if not coupling.any() else scipy.linalg.solve_triangular(eye - coupling, eye, lower=True)
-    c = structure.output_matrix(h)
-    a = structure.shift_matrix() + k_gain @ c
-    lam = np.ones(m)
-    if asymmetric:
-        for j in nonbinary:
-            lam[j] = 1.0 + float(asym[:, j] @ b[:, j] / (b[:, j] @ b[:, j]))
-        binary = np.flatnonzero(~np.isnan(gamma))
-        if binary.size:
-            # eq 42: intercept = theta_u_bar (Lambda - I) gamma, theta_u_bar = sum_d C A_o^d B
-            theta_u_bar = np.zeros((p, m))
-            for i in range(p):
-                for d in range(structure.indices[i]):
-                    theta_u_bar[i] += b[structure.position(i, d)]
-            offsets, _, rank, _ = np.linalg.lstsq(theta_u_bar[:, binary], intercept, rcond=None)
-            if rank < binary.size:
-                raise ValueError(
-                    f"the {binary.size} PRBS inputs' gains lambda cannot be separated with the outputs "
-                    f"{', '.join(output_names)} (eq 42 needs as many independent outputs as PRBS inputs); "
-                    "identify without the asymmetric gains (--symmetric)"
-                )
-            lam[binary] = 1.0 + offsets / gamma[binary]
-            intercept = intercept - theta_u_bar[:, binary] @ offsets
-    return a, b, c, lam, intercept

@@ -25,7 +25,7 @@ import scipy.linalg
 from ssme_envs.models.uncertainty import ParameterUncertainty, jacobian
 
 if TYPE_CHECKING:
-    from ssme_envs.identification.alpha_canonical import _Fit
+    from ssme_envs.identification.alpha_fit import _Fit
     from ssme_envs.models.statespace import AlphaCanonicalModel
 
 

@@ -13,10 +13,8 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
-import scipy.signal
 
 from ssme_envs.identification.bouc_wen import (
     DEFAULT_NORMALIZATION_A,
@@ -26,205 +24,43 @@ from ssme_envs.identification.bouc_wen import (
     fit_bouc_wen,
 )
 from ssme_envs.identification.metrics import fit_percent
+from ssme_envs.identification.nozzle_bench import (
+    BENCH_SAMPLES,
+    DECIMATION,
+    DEFAULT_SEED,
+    RANGE_DEG,
+    SENSOR_NOISE,
+    NozzleRecord,
+    acquire,
+    acquisition_bias,
+    bench_experiment,
+    bench_motion,
+    read_nozzle_record,
+    strong_hysteresis_nozzle,
+    validation_experiment,
+    write_nozzle_record,
+)
 from ssme_envs.identification.nozzle_uncertainty import (
     DEFAULT_REPLICATES,
     BootstrapUncertainty,
     dsr_e_uncertainty,
 )
-from ssme_envs.identification.records import read_columns, write_columns
 from ssme_envs.identification.subspace import InnovationsModel, SubspaceResult, dsr_e, second_order_parameters
 from ssme_envs.models.nozzle import (
-    BENCH_RATE_HZ,
-    DEFAULT_TORQUE_LIMIT,
-    NOZZLE_DT,
     NozzleModel,
     NozzleParameters,
     published_nozzle,
     recommended_substeps,
     simulate_nozzle,
-    strong_nozzle,
 )
 from ssme_envs.models.uncertainty import ParameterUncertainty
-from ssme_envs.outputs import atomic_write
-from ssme_envs.signals import prbs
 
-DEFAULT_SEED = 7
-BENCH_SAMPLES = 7476  # the paper's N at Ts = 0.008 s (59.8 s)
-DECIMATION = round(BENCH_RATE_HZ * NOZZLE_DT)  # 20
 # Simulated acquisitions whose mean is the acquisition chain's bias on J, b, k.
 BIAS_DRAWS = 8
-SENSOR_NOISE = 1e-4  # rad, std of the angle sensor at 2.5 kHz (an assumption: 0.006 deg)
-RANGE_DEG = 3.0
 BOUC_WEN_METHOD = (
     "regression covariance s^2 (J^T J)^-1 of the output-error fit at the optimum: J the "
     "forward-difference Jacobian of the simulated angle, s^2 = SSE / (N - 7)"
 )
-
-
-@dataclass
-class NozzleRecord:
-    """Torque (N m) and measured angle (rad) at a fixed sample time (s)."""
-
-    tau: np.ndarray
-    beta: np.ndarray
-    dt: float
-    input_name: str = "tau"
-    output_name: str = "beta"
-
-
-# the bench tests' name for the strong-hysteresis nozzle of the models
-strong_hysteresis_nozzle = strong_nozzle
-
-
-def _bench_torque(samples: int, n_bits: int, clock: int, amplitude: float) -> np.ndarray:
-    return prbs(samples, amplitude=amplitude, n_inputs=1, n_bits=n_bits, clock_samples=clock)[:, 0]
-
-
-def bench_experiment(
-    params: NozzleParameters,
-    seed: int = DEFAULT_SEED,
-    samples: int = BENCH_SAMPLES,
-    n_bits: int = 12,
-    clock: int = 2,
-    range_deg: float = RANGE_DEG,
-    noise_std: float = SENSOR_NOISE,
-    torque_limit: float = DEFAULT_TORQUE_LIMIT,
-) -> NozzleRecord:
-    """Simulate the bench test of a nozzle and return the decimated record.
-
-    Parameters
-    ----------
-    params : NozzleParameters
-        The nozzle on the bench (the truth).
-    seed : int
-        Seed of the sensor noise.
-    samples : int
-        Record length at Ts = 0.008 s (7476 as in the paper).
-    n_bits, clock : int
-        PRBS register length and bit length in 0.008 s samples (12 bits, 16 ms: flat spectrum
-        to about 30 Hz, past the joint's resonance near 12 Hz).
-    range_deg : float
-        The PRBS amplitude is scaled so that the angle peaks at this value.
-    noise_std : float
-        Angle sensor noise at the bench rate, rad.
-    torque_limit : float
-        Actuator torque limit, N m.
-    """
-    tau, angle = bench_motion(params, samples, n_bits, clock, range_deg, torque_limit)
-    return NozzleRecord(tau, acquire(angle, seed, noise_std), NOZZLE_DT)
-
-
-def bench_motion(
-    params: NozzleParameters,
-    samples: int = BENCH_SAMPLES,
-    n_bits: int = 12,
-    clock: int = 2,
-    range_deg: float = RANGE_DEG,
-    torque_limit: float = DEFAULT_TORQUE_LIMIT,
-) -> tuple[np.ndarray, np.ndarray]:
-    """The bench's torque at Ts = 0.008 s (N m) and the true angle at the bench rate (rad).
-
-    The noise-free half of :func:`bench_experiment` (same arguments); :func:`acquire` adds the
-    rest, so that many noise seeds can share one simulation.
-    """
-    if samples < 50:
-        raise ValueError(f"samples must be at least 50, got {samples}")
-    if not range_deg > 0:
-        raise ValueError(f"range_deg must be positive, got {range_deg!r}")
-    # Scale the amplitude on the decimated model (cheap), three passes for the nonlinearity.
-    amplitude = params.small_signal_stiffness * np.radians(range_deg) * 0.3
-    for _ in range(3):
-        peak = np.max(np.abs(simulate_nozzle(params, _bench_torque(samples, n_bits, clock, amplitude))))
-        amplitude *= np.radians(range_deg) / peak
-    amplitude = min(amplitude, torque_limit)  # the actuator cannot do more
-    tau = _bench_torque(samples, n_bits, clock, amplitude)
-    return tau, _bench_rate_angle(params, tau, torque_limit)
-
-
-def _bench_rate_angle(joint: NozzleParameters, tau: np.ndarray, torque_limit: float) -> np.ndarray:
-    """The joint's true angle at the bench rate (rad) under the torque held over each Ts sample."""
-    return simulate_nozzle(
-        joint, np.repeat(tau, DECIMATION), dt=NOZZLE_DT / DECIMATION, substeps=1, torque_limit=torque_limit
-    )
-
-
-def acquire(angle: np.ndarray, seed: int = DEFAULT_SEED, noise_std: float = SENSOR_NOISE) -> np.ndarray:
-    """The measured angle at Ts: sensor noise (std ``noise_std`` rad, seeded) added at the bench
-    rate, then the anti-alias FIR filter (zero phase) and decimation by 20."""
-    measured = angle + noise_std * np.random.default_rng(seed).standard_normal(angle.size)
-    return scipy.signal.decimate(measured, DECIMATION, ftype="fir", zero_phase=True)
-
-
-def acquisition_bias(
-    tau: np.ndarray,
-    jbk: tuple[float, float, float],
-    noise_std: float = 0.0,
-    draws: int = 1,
-    seed: int = DEFAULT_SEED,
-) -> dict[str, float]:
-    """The bias of DSR_e's J, b, k that the bench's acquisition chain causes, by simulation.
-
-    The anti-alias filter of :func:`acquire` changes the motion in the band the ZOH model
-    describes (about -0.05 % on J, +0.14 % on b, -0.07 % on k for Table 1's joint: ten to thirty
-    standard errors of the noise), and the innovations form then trades that mismatch against
-    the sensor noise, so the bias depends on the noise level too. The linear joint with the
-    estimated J, b, k is driven by the record's torque at the bench rate, acquired ``draws``
-    times with sensor noise of ``noise_std`` (seeded) and identified again; the mean change is
-    the bias at the estimate (corrected estimate: estimate minus it; what remains is second order
-    in the estimate's error, plus the draws' scatter, 1/draws of the noise's variance).
-
-    Parameters
-    ----------
-    tau : array, shape (T,)
-        The record's torque at Ts = 0.008 s, N m.
-    jbk : (float, float, float)
-        Estimated J (kg m^2), b (N m s/rad), k (N m/rad).
-    noise_std : float
-        Sensor noise of the record at the bench rate, rad (0: one noise-free acquisition).
-    draws : int
-        Simulated acquisitions averaged (used when ``noise_std`` > 0).
-    seed : int
-        Seed of the simulated noise.
-
-    Returns
-    -------
-    dict
-        ``{"J", "b", "k"}``: mean identified from the simulated acquisitions minus ``jbk``.
-    """
-    fast = _bench_rate_angle(NozzleParameters.linear(*jbk), tau, np.inf)
-    seeds = np.random.SeedSequence(seed).generate_state(draws if noise_std > 0 else 1)
-    found = []
-    for draw_seed in seeds:
-        tf = second_order_parameters(
-            dsr_e(tau, acquire(fast, int(draw_seed), noise_std), NOZZLE_DT, order=2).model
-        )
-        found.append([tf["J"], tf["b"], tf["k"]])
-    mean = np.mean(found, axis=0)
-    return {key: float(m - value) for key, m, value in zip(("J", "b", "k"), mean, jbk, strict=True)}
-
-
-def validation_experiment(params: NozzleParameters, seed: int = DEFAULT_SEED + 1) -> NozzleRecord:
-    """A second bench record the fit never sees: 11-bit PRBS with a 24 ms clock, 20 s."""
-    return bench_experiment(params, seed=seed, samples=2500, n_bits=11, clock=3)
-
-
-def read_nozzle_record(
-    path: str | Path, input_name: str = "tau", output_name: str = "beta", dt: float | None = None
-) -> NozzleRecord:
-    """A torque -> angle record from CSV, checked as the fit and the validation need it."""
-    data, dt = read_columns(path, [input_name, output_name], dt)
-    try:
-        check_torque_record(data[:, 0], data[:, 1], names=(input_name, output_name))
-    except ValueError as exc:
-        raise ValueError(f"{path}: {exc}") from None
-    return NozzleRecord(data[:, 0], data[:, 1], dt, input_name, output_name)
-
-
-def write_nozzle_record(path: str | Path, record: NozzleRecord) -> None:
-    """Write a record as CSV with columns t, torque, angle (atomically)."""
-    with atomic_write(path) as fh:
-        names = [record.input_name, record.output_name]
-        write_columns(fh, record.dt, names, np.column_stack([record.tau, record.beta]))
 
 
 @dataclass
@@ -411,3 +247,30 @@ def run_default(
     }
     ident.model.fit["truth"] = f"{described[truth]}; embedded bench test, seed {seed}"
     return ident, records
+
+
+__all__ = [
+    "BENCH_SAMPLES",
+    "BIAS_DRAWS",
+    "BOUC_WEN_METHOD",
+    "DECIMATION",
+    "DEFAULT_NORMALIZATION_A",
+    "DEFAULT_SEED",
+    "RANGE_DEG",
+    "SENSOR_NOISE",
+    "NozzleIdentification",
+    "NozzleRecord",
+    "acquire",
+    "acquisition_bias",
+    "bench_experiment",
+    "bench_motion",
+    "identify_nozzle",
+    "read_nozzle_record",
+    "run_default",
+    "simulate_joint",
+    "simulate_linear_model",
+    "strong_hysteresis_nozzle",
+    "validate_nozzle",
+    "validation_experiment",
+    "write_nozzle_record",
+]

@@ -5,9 +5,10 @@ adds in front of it: valve linkage backlash and valve stiction (isolated from th
 dynamics in the paper, "determined from manufacturer's specifications or bench testing"), the
 asymmetric input gains lambda of eq 36, and sensor noise on the measured outputs.
 
-The step exists on floats (:func:`step_floats`, one engine) and on arrays (:func:`step_arrays`,
-N engines), one arithmetic: the env tasks step these (``envs.engine_task``); :class:`EngineCore`
-holds N engines' state around :func:`step_arrays` for the simulators below.
+The step exists on floats (:func:`~ssme_envs.models.engine_step.step_floats`, one engine) and on
+arrays (:func:`~ssme_envs.models.engine_step.step_arrays`, N engines), one arithmetic: the env
+tasks step these (``envs.engine_task``); :class:`EngineCore` holds N engines' state around
+:func:`~ssme_envs.models.engine_step.step_arrays` for the simulators below.
 
 Valve nonlinearities (defaults are assumptions: the paper gives no widths):
 
@@ -26,6 +27,7 @@ from importlib import resources
 
 import numpy as np
 
+from ssme_envs.models.engine_step import StepParameters, step_arrays, step_floats
 from ssme_envs.models.statespace import AlphaCanonicalModel
 
 POWER_LEVELS: tuple[int, ...] = (70, 80, 90, 100, 110)
@@ -113,181 +115,6 @@ class TruthConfig:
     def ideal(cls) -> TruthConfig:
         """The point model with its lambda only: no valve nonlinearity, no noise."""
         return cls(backlash=0.0, stiction=0.0, sensor_noise=0.0)
-
-
-@dataclass(frozen=True)
-class StepParameters:
-    """What one engine step needs: the alpha-canonical shift structure, K, B, lambda - 1 (arrays,
-    with a leading batch axis when every engine has its own model), and the valve widths."""
-
-    shift_source: tuple[int, ...]
-    K: np.ndarray
-    B: np.ndarray
-    lam_minus_one: np.ndarray
-    half_backlash: float
-    stiction: float
-
-    @classmethod
-    def from_model(cls, model: AlphaCanonicalModel, config: TruthConfig) -> StepParameters:
-        a_o = model.structure.shift_matrix()
-        lam = model.lam - 1.0 if config.asymmetric_gains else np.zeros(model.n_inputs)
-        return cls(
-            shift_source=tuple(int(np.argmax(row)) if row.any() else -1 for row in a_o),
-            # The last p states are w = H^-1 y; they enter through A's last columns, K H.
-            K=model.A[:, model.A.shape[0] - model.n_outputs :].copy(),
-            B=model.B.copy(),
-            lam_minus_one=lam,
-            half_backlash=0.5 * config.backlash,
-            stiction=float(config.stiction),
-        )
-
-    def floats(self) -> tuple[list, list, list]:
-        """K and B rows and lambda - 1 as Python floats, for :func:`step_floats`."""
-        return self.K.tolist(), self.B.tolist(), self.lam_minus_one.tolist()
-
-
-# The engine step exists twice, on purpose: on Python floats for one engine (an order of
-# magnitude faster than numpy on 1-element arrays, for the scalar environment) and on arrays
-# for a batch (the vector environment, the simulators). Both perform the same IEEE operations
-# in the same order, so an engine gives the same bits alone or batched; tests hold them to it.
-# Order: linkage = min(max(l, c - h), c + h); valve = q if |q - v| > s else v;
-# u* = v + (lambda - 1)|v|; x_i <- (x_src(i) + sum_j K_ij y_j) + sum_j B_ij u*_j, sums left to right
-# (no x_src term for the first state of each output's chain).
-
-
-def valves_floats(linkage: list, valve: list, command: list, half: float, stick: float) -> tuple[list, list]:
-    """Backlash then stiction for one engine's valves, on floats. Returns (linkage, valve)."""
-    if half:
-        linkage = [min(max(lk, c - half), c + half) for lk, c in zip(linkage, command)]
-    else:
-        linkage = command
-    if stick:
-        valve = [q if abs(q - v) > stick else v for q, v in zip(linkage, valve)]
-    else:
-        valve = linkage
-    return linkage, valve
-
-
-def dynamics_floats(x: list, u: list, shift_source: tuple, k_rows: list, b_rows: list) -> list:
-    """``x(k+1) = A_o x + K y + B u`` (eq 9) for one engine on floats, ``y`` the last p states."""
-    y = x[len(x) - len(k_rows[0]) :]
-    if len(y) == 2 and len(u) == 2:  # the SSME's two outputs and two valves, unrolled, same order
-        y0, y1 = y
-        u0, u1 = u
-        return [
-            ((x[source] + (k0 * y0 + k1 * y1)) if source >= 0 else (k0 * y0 + k1 * y1)) + (b0 * u0 + b1 * u1)
-            for source, (k0, k1), (b0, b1) in zip(shift_source, k_rows, b_rows)
-        ]
-    x_next = []
-    for source, k_row, b_row in zip(shift_source, k_rows, b_rows):
-        ky = k_row[0] * y[0]
-        for k, yj in zip(k_row[1:], y[1:]):
-            ky = ky + k * yj
-        bu = b_row[0] * u[0]
-        for b, uj in zip(b_row[1:], u[1:]):
-            bu = bu + b * uj
-        x_next.append(((x[source] + ky) if source >= 0 else ky) + bu)
-    return x_next
-
-
-def step_floats(x: list, linkage: list, valve: list, command: list, p: StepParameters, rows: tuple) -> tuple:
-    """One engine, one sample, on floats; ``rows`` = ``p.floats()``. Returns (x, linkage, valve)."""
-    k_rows, b_rows, lam = rows
-    linkage, valve = valves_floats(linkage, valve, command, p.half_backlash, p.stiction)
-    u = [v + g * abs(v) for v, g in zip(valve, lam)]
-    return dynamics_floats(x, u, p.shift_source, k_rows, b_rows), linkage, valve
-
-
-# The env tasks' engines have two valves and two outputs: their float step is the one above,
-# unrolled over unpacked floats (a third of its time, which is list building and zips), the
-# same operations in the same order.
-
-
-def pair_rows(shift_source: tuple, k_rows: list, b_rows: list) -> tuple:
-    """Per state ``(source, K_i0, K_i1, B_i0, B_i1)`` of a two-output, two-valve model, for
-    :func:`dynamics_pair_floats`."""
-    return tuple(
-        (source, k0, k1, b0, b1)
-        for source, (k0, k1), (b0, b1) in zip(shift_source, k_rows, b_rows, strict=True)
-    )
-
-
-def valves_pair_floats(
-    linkage: tuple, valve: tuple, c0: float, c1: float, half: float, stick: float
-) -> tuple[tuple, tuple]:
-    """:func:`valves_floats` for two valves. ``min(max(l, lo), hi)`` is spelled as the builtins
-    decide (each returns its first argument unless the second lies strictly beyond it), which
-    gives the same value, NaN and signed zeros included, without two calls per valve."""
-    l0, l1 = linkage
-    if half:
-        lo, hi = c0 - half, c0 + half
-        l0 = lo if lo > l0 else l0
-        l0 = hi if hi < l0 else l0
-        lo, hi = c1 - half, c1 + half
-        l1 = lo if lo > l1 else l1
-        l1 = hi if hi < l1 else l1
-    else:
-        l0, l1 = c0, c1
-    if stick:
-        v0, v1 = valve
-        v0 = l0 if abs(l0 - v0) > stick else v0
-        v1 = l1 if abs(l1 - v1) > stick else v1
-    else:
-        v0, v1 = l0, l1
-    return (l0, l1), (v0, v1)
-
-
-def dynamics_pair_floats(x: list, u0: float, u1: float, rows: tuple) -> list:
-    """:func:`dynamics_floats` for two outputs and two valves; ``rows`` from :func:`pair_rows`."""
-    y0, y1 = x[-2], x[-1]
-    return [
-        ((x[source] + (k0 * y0 + k1 * y1)) if source >= 0 else (k0 * y0 + k1 * y1)) + (b0 * u0 + b1 * u1)
-        for source, k0, k1, b0, b1 in rows
-    ]
-
-
-def valves_arrays(linkage: np.ndarray, valve: np.ndarray, command: np.ndarray, half: float, stick: float):
-    """Backlash then stiction for N engines' valves, (m, N) arrays. Returns (linkage, valve)."""
-    linkage = np.minimum(np.maximum(linkage, command - half), command + half) if half else command
-    valve = np.where(np.abs(linkage - valve) > stick, linkage, valve) if stick else linkage
-    return linkage, valve
-
-
-def dynamics_arrays(
-    x: np.ndarray, u: np.ndarray, shift_source: tuple, k_gain: np.ndarray, b_gain: np.ndarray
-):
-    """``x(k+1) = A_o x + K y + B u`` for N engines, state-major x (n, N), u (m, N); K (n, p) and
-    B (n, m), or (n, p, N) and (n, m, N) for one model per engine."""
-    n_out = k_gain.shape[1]
-    y = x[x.shape[0] - n_out :]
-    scratch = np.empty((x.shape[0], x.shape[1]))
-    x_next = np.multiply(_column(k_gain, 0), y[0])
-    for j in range(1, n_out):
-        x_next += np.multiply(_column(k_gain, j), y[j], out=scratch)
-    for i, source in enumerate(shift_source):  # the shift part of A_o: x_i += x_src(i)
-        if source >= 0:
-            x_next[i] += x[source]
-    bu = np.multiply(_column(b_gain, 0), u[0])
-    for j in range(1, b_gain.shape[1]):
-        bu += np.multiply(_column(b_gain, j), u[j], out=scratch)
-    x_next += bu
-    return x_next
-
-
-def step_arrays(
-    x: np.ndarray, linkage: np.ndarray, valve: np.ndarray, command: np.ndarray, p: StepParameters
-):
-    """N engines, one sample, state-major: x (n, N), linkage, valve, command (m, N). Returns
-    (x, linkage, valve). Rows are contiguous, so every operation runs over N engines at once."""
-    linkage, valve = valves_arrays(linkage, valve, command, p.half_backlash, p.stiction)
-    lam = p.lam_minus_one
-    u = valve + (lam[:, None] if lam.ndim == 1 else lam) * np.abs(valve)
-    return dynamics_arrays(x, u, p.shift_source, p.K, p.B), linkage, valve
-
-
-def _column(gain: np.ndarray, j: int) -> np.ndarray:
-    """Column j of a gain as (n, 1) to multiply a row of N engines, or (n, N) when per engine."""
-    return gain[:, j, None] if gain.ndim == 2 else gain[:, j]
 
 
 def check_stable_plant(model: AlphaCanonicalModel) -> None:

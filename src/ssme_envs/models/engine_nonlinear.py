@@ -78,9 +78,9 @@ from ssme_envs.models.engine import (
     TruthConfig,
     published_model,
     sensor_noise_std,
-    valves_arrays,
     with_sensor_noise,
 )
+from ssme_envs.models.engine_step import valves_arrays
 from ssme_envs.models.statespace import AlphaCanonicalModel
 
 SCHEDULE_RANGE = (62.5, 115.0)  # %, saturation of the scheduling variable

@@ -1,0 +1,209 @@
+"""The innovations-form model and the result DSR_e returns, with the model read as a continuous-time
+system and as the J, b, k of a mass-spring joint: apart from the algorithm, since nozzle models
+and reports simulate and read the model without identifying anything."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg
+import scipy.signal
+
+from ssme_envs.models.linear import Dimensions, StateSpace, check_dt
+
+
+@dataclass(frozen=True, eq=False)
+class InnovationsModel(Dimensions):
+    """Discrete innovations-form model ``x+ = A x + B u + K e``, ``y = C x + D u + e``.
+
+    Attributes
+    ----------
+    A, B, C, D, K : ndarray
+        Shapes (n, n), (n, m), (p, n), (p, m), (n, p); inputs and outputs in the units of the
+        identification record.
+    dt : float
+        Sample time, s.
+    """
+
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    D: np.ndarray
+    K: np.ndarray
+    dt: float
+
+    def __post_init__(self) -> None:
+        mats = {name: np.array(getattr(self, name), dtype=float, ndmin=2) for name in "ABCDK"}
+        n, m, p = mats["A"].shape[0], mats["B"].shape[1], mats["C"].shape[0]
+        expected = {"A": (n, n), "B": (n, m), "C": (p, n), "D": (p, m), "K": (n, p)}
+        for name, shape in expected.items():
+            if mats[name].shape != shape:
+                raise ValueError(f"{name} has shape {mats[name].shape}, expected {shape}")
+            if not np.all(np.isfinite(mats[name])):
+                raise ValueError(f"{name} has NaN or inf entries")
+            mats[name].setflags(write=False)
+            object.__setattr__(self, name, mats[name])
+        object.__setattr__(self, "dt", check_dt(self.dt))
+
+    def state_space(self) -> StateSpace:
+        """The deterministic part ``(A, B, C, D)`` as the package's one state-space type (the
+        innovations gain ``K`` is the predictor's, not the plant's)."""
+        return StateSpace(self.A, self.B, self.C, self.dt, self.D)
+
+    def simulate(self, u: np.ndarray, y: np.ndarray | None = None) -> np.ndarray:
+        """Model output, shape (T, p).
+
+        Parameters
+        ----------
+        u : array, shape (T, m) or (T,) for one input
+            Inputs.
+        y : array, shape (T, p) or (T,), optional
+            Measured outputs. When given, the result is the one-step prediction of the Kalman
+            filter ``x+ = A x + B u + K (y - C x - D u)``, ``y_hat = C x + D u``; otherwise the
+            pure simulation ``x+ = A x + B u``. Both start from the zero state.
+        """
+        u = _as_columns(u, "u")
+        if u.shape[1] != self.n_inputs:
+            raise ValueError(f"u has {u.shape[1]} channels but the model has {self.n_inputs} inputs")
+        if y is None:
+            a, b_in, inputs = self.A, self.B, u
+        else:
+            y = _as_columns(y, "y")
+            if y.shape != (u.shape[0], self.n_outputs):
+                raise ValueError(f"y has shape {y.shape}, expected {(u.shape[0], self.n_outputs)}")
+            a = self.A - self.K @ self.C
+            b_in = np.hstack([self.B - self.K @ self.D, self.K])
+            inputs = np.hstack([u, y])
+        if not np.all(np.isfinite(inputs)):
+            raise ValueError("u and y must be finite")
+        states = np.empty((u.shape[0], self.n_states))
+        x = np.zeros(self.n_states)
+        drive = inputs @ b_in.T
+        for k in range(u.shape[0]):
+            states[k] = x
+            x = a @ x + drive[k]
+        return states @ self.C.T + u @ self.D.T
+
+
+@dataclass
+class SubspaceResult:
+    """Outcome of :func:`dsr_e`.
+
+    Attributes
+    ----------
+    model : InnovationsModel
+        The identified model.
+    singular_values : ndarray
+        Singular values of the projected data matrix ``Z``, largest first (order selection).
+    order : int
+        Number of states.
+    past_horizon : int
+        Past horizon ``J`` used, samples.
+    future_horizon : int
+        Future horizon ``L`` used: the extended observability matrix has ``L + 1`` block rows.
+    """
+
+    model: InnovationsModel
+    singular_values: np.ndarray
+    order: int
+    past_horizon: int
+    future_horizon: int
+
+
+def _as_columns(x: np.ndarray, name: str) -> np.ndarray:
+    x = np.asarray(x, dtype=float)
+    x = x[:, None] if x.ndim == 1 else x
+    if x.ndim != 2:
+        raise ValueError(f"{name} must have shape (samples, channels), got {x.shape}")
+    return x
+
+
+def to_continuous(model: InnovationsModel) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Continuous-time (Ac, Bc, Cc, Dc) whose zero-order-hold discretization is the model.
+
+    The exact inverse of ZOH: ``logm([[A, B], [0, I]]) / dt`` holds ``[[Ac, Bc], [0, 0]]``.
+    ``Ac`` in 1/s, ``Bc`` in output units per input unit per s; ``Cc = C``, ``Dc = D``.
+
+    Raises
+    ------
+    ValueError
+        When ``A`` has an eigenvalue at zero or on the negative real axis: no real
+        continuous system sampled with a zero-order hold gives such a pole.
+    """
+    n, m = model.n_states, model.n_inputs
+    for pole in model.poles():
+        if abs(pole.imag) <= 1e-12 * max(abs(pole), 1e-300) and pole.real <= 0:
+            raise ValueError(
+                f"A has the eigenvalue {pole.real:.6g} on the negative real axis or at zero: the "
+                "zero-order hold cannot be inverted (no real continuous-time equivalent)"
+            )
+    block = np.zeros((n + m, n + m))
+    block[:n, :n] = model.A
+    block[:n, n:] = model.B
+    block[n:, n:] = np.eye(m)
+    log_block = scipy.linalg.logm(block)
+    if np.iscomplexobj(log_block):
+        if np.max(np.abs(log_block.imag)) > 1e-8 * max(np.max(np.abs(log_block.real)), 1.0):
+            raise ValueError("the matrix logarithm of the model is not real: no continuous equivalent")
+        log_block = log_block.real
+    gen = log_block / model.dt
+    return gen[:n, :n], gen[:n, n:], model.C.copy(), model.D.copy()
+
+
+def second_order_parameters(model: InnovationsModel) -> dict[str, float | list[float]]:
+    """Physical parameters of a SISO second-order model ``J x'' + b x' + k x = tau``.
+
+    The continuous transfer function (inverse ZOH, :func:`to_continuous`) is written
+    ``(b2 s^2 + b1 s + b0) / (s^2 + a1 s + a0)``; the physical model has
+    ``(1/J) / (s^2 + (b/J) s + k/J)``, so ``J = 1/b0``, ``b = a1 J``, ``k = a0 J``. An identified
+    model usually also has small ``b1`` and ``b2`` (sampling zeros, noise), reported as they are.
+
+    Returns
+    -------
+    dict
+        ``numerator`` [b2, b1, b0] and ``denominator`` [1, a1, a0] (s-polynomials, highest power
+        first); ``numerator_s_coefficient`` b1; ``J`` (input units s^2 per output unit), ``b``
+        (input units s per output unit), ``k`` (input units per output unit);
+        ``natural_frequency_hz`` sqrt(a0) / 2 pi; ``damping_ratio`` a1 / (2 sqrt(a0));
+        ``resonance_frequency_hz`` the peak of the magnitude, ``f_n sqrt(1 - 2 zeta^2)``, NaN when
+        ``zeta >= 1/sqrt(2)`` (no peak).
+
+    Raises
+    ------
+    ValueError
+        Not SISO, not second order, no DC gain (b0 = 0), or not an oscillator (a0 <= 0).
+    """
+    if model.n_inputs != 1 or model.n_outputs != 1:
+        raise ValueError(
+            f"a single-input single-output model is needed, got {model.n_inputs} inputs and "
+            f"{model.n_outputs} outputs"
+        )
+    if model.n_states != 2:
+        raise ValueError(f"a second-order model is needed, got order {model.n_states}")
+    ac, bc, cc, dc = to_continuous(model)
+    num, den = scipy.signal.ss2tf(ac, bc, cc, dc)
+    num = np.asarray(num, dtype=float).ravel() / den[0]
+    den = np.asarray(den, dtype=float) / den[0]
+    b2, b1, b0 = num[-3:]
+    _, a1, a0 = den
+    if abs(b0) <= 1e-12 * max(np.max(np.abs(num)), 1e-300):
+        raise ValueError("the model has no static gain (b0 = 0): J = 1/b0 is undefined")
+    if a0 <= 0:
+        raise ValueError(f"the model is not an oscillator (a0 = {a0:.6g} <= 0): no natural frequency")
+    inertia = 1.0 / b0
+    omega_n = math.sqrt(a0)
+    zeta = a1 / (2.0 * omega_n)
+    resonance = omega_n * math.sqrt(1.0 - 2.0 * zeta**2) if zeta < 1.0 / math.sqrt(2.0) else math.nan
+    return {
+        "numerator": [float(b2), float(b1), float(b0)],
+        "denominator": [1.0, float(a1), float(a0)],
+        "numerator_s_coefficient": float(b1),
+        "J": float(inertia),
+        "b": float(a1 * inertia),
+        "k": float(a0 * inertia),
+        "natural_frequency_hz": omega_n / (2.0 * math.pi),
+        "damping_ratio": float(zeta),
+        "resonance_frequency_hz": resonance / (2.0 * math.pi),
+    }
