@@ -44,12 +44,25 @@ CONFIG_STEMS = {
 }
 
 
+def _tried_folders(env_id: str) -> dict[str, Path]:
+    return {name: HERE / "runs" / folder.format(CONFIG_STEMS[env_id]) for name, folder in TRIED.items()}
+
+
 def tried_runs(env_id: str) -> dict[str, Path]:
     """``{name: run directory}`` of the tried runs of an env found under experiments/runs/ (e.g.
     ``ssme-envs train --config experiments/configs/sac_nozzle_tvc.toml --out
     experiments/runs/sac_nozzle_tvc``)."""
-    runs = {name: HERE / "runs" / folder.format(CONFIG_STEMS[env_id]) for name, folder in TRIED.items()}
-    return {name: run for name, run in runs.items() if (run / "training.json").exists()}
+    return {name: run for name, run in _tried_folders(env_id).items() if (run / "training.json").exists()}
+
+
+def missing_runs(env_id: str) -> list[Path]:
+    """The tried runs of an env that have a config but no run under experiments/runs/ (runs/ is
+    not shipped: a fresh clone has none, and their columns then drop out of the tables)."""
+    return [
+        run
+        for run in _tried_folders(env_id).values()
+        if (HERE / "configs" / f"{run.name}.toml").exists() and not (run / "training.json").exists()
+    ]
 
 
 def training_rows() -> list[str]:
@@ -126,6 +139,16 @@ def main() -> None:
                 f"{summary['seconds']:.0f} s, the policy of {summary['kept']['steps']:,} steps kept"
             )
         lines.append("")
+    missing = [run for e in evaluations for run in missing_runs(e)]
+    if missing:
+        names = ", ".join(run.name for run in missing)
+        print(f"note: tried runs not in experiments/runs/, left out of the tables: {names}", flush=True)
+        lines += [
+            f"Tried runs not found under experiments/runs/ when this file was written, so not in its "
+            f"tables: {names} (train each with `ssme-envs train --config experiments/configs/NAME.toml "
+            "--out experiments/runs/NAME`).",
+            "",
+        ]
     write_text(RESULTS, "\n".join(lines))
     print(f"wrote {RESULTS}")
 

@@ -41,6 +41,15 @@ def test_packaged_design_models_are_what_the_pipeline_produces(default_results):
             fresh.fit["validation_low_frequency"]["model"]["see"],
             rtol=1e-6,
         )
+        # the structure search's record too: the candidates weighed, their scores and the margin
+        kept, now = packaged.fit["structure"], fresh.fit["structure"]
+        assert kept["chosen"] == list(now["chosen"]) and kept["criterion"] == now["criterion"]
+        assert [(c["indices"], c["note"]) for c in kept["candidates"]] == [
+            (list(c["indices"]), c["note"]) for c in now["candidates"]
+        ]
+        scores = [[c["criterion"] for c in record["candidates"]] for record in (kept, now)]
+        np.testing.assert_allclose(*scores, rtol=1e-9)
+        np.testing.assert_allclose(kept["margin"], now["margin"], rtol=1e-6)
 
 
 def test_design_models_are_close_to_the_truth(default_results):

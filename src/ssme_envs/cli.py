@@ -87,7 +87,7 @@ def build_parser() -> argparse.ArgumentParser:
         "engine",
         help="SSME valves -> Pc, MR in alpha-canonical form",
         description="Identify an alpha-canonical engine model (NASA TM-104422). Without --data, run "
-        "the embedded PRBS experiment on the truth at 70-110 %% power and compare with Tables I and II.",
+        "the embedded PRBS experiment on the truth at 70-110 % power and compare with Tables I and II.",
         epilog=OUTPUT_NOTE,
     )
     engine.add_argument(
