@@ -42,14 +42,15 @@ def test_packaged_design_models_are_what_the_pipeline_produces(default_results):
             rtol=1e-6,
         )
         # the structure search's record too: the candidates weighed, their scores and the margin
+        # (the output-error refined scores move by about 1e-7 relative with the BLAS thread count)
         kept, now = packaged.fit["structure"], fresh.fit["structure"]
         assert kept["chosen"] == list(now["chosen"]) and kept["criterion"] == now["criterion"]
         assert [(c["indices"], c["note"]) for c in kept["candidates"]] == [
             (list(c["indices"]), c["note"]) for c in now["candidates"]
         ]
         scores = [[c["criterion"] for c in record["candidates"]] for record in (kept, now)]
-        np.testing.assert_allclose(*scores, rtol=1e-9)
-        np.testing.assert_allclose(kept["margin"], now["margin"], rtol=1e-6)
+        np.testing.assert_allclose(*scores, rtol=1e-5)
+        assert abs(kept["margin"] - now["margin"]) < 0.5  # BIC units; stale records were 3-17 off
 
 
 def test_design_models_are_close_to_the_truth(default_results):
