@@ -115,6 +115,7 @@ def test_evaluate_command_rejects_bad_names(args, message, tmp_path, capsys):
     assert __import__("re").search(message, err), err
 
 
+@pytest.mark.slow
 def test_report_command_writes_one_report(tmp_path, capsys):
     out = tmp_path / "report"
     assert main(["report", "--out", str(out), "--episodes", "2"]) == 0

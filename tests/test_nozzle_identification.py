@@ -203,6 +203,7 @@ def test_validation_needs_the_model_sample_time():
         validate_nozzle(model, record)
 
 
+@pytest.mark.slow
 def test_cli_default_bench_reproduces_the_packaged_model(tmp_path, capsys):
     out = tmp_path / "nozzle"
     assert main(["identify", "nozzle", "--out", str(out)]) == 0

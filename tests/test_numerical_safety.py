@@ -179,6 +179,7 @@ def _run_against_sync(env_id: str, plant: NozzleParameters, mode: AutoresetMode,
     return steps
 
 
+@pytest.mark.slow
 @SETTINGS
 @given(plant=plants(), mode=st.sampled_from([AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP]))
 def test_nozzle_envs_stay_finite_or_refuse_the_plant(plant, mode):
