@@ -20,9 +20,9 @@ policy's copy in agents/policies/ where its run is not there).
 
 from __future__ import annotations
 
+import argparse
 import json
 import shutil
-import sys
 from pathlib import Path
 
 from agents import parse_controller
@@ -126,10 +126,15 @@ def main(names: list[str], evaluate_only: bool = False) -> None:
 
 
 if __name__ == "__main__":
-    args = sys.argv[1:]
-    evaluate_only = "--evaluate-only" in args
-    names = [arg for arg in args if arg != "--evaluate-only"]
-    unknown = sorted(set(names) - set(PLANT))
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument(
+        "names", nargs="*", metavar="CONFIG", help=f"configs to run (default: all): {', '.join(PLANT)}"
+    )
+    parser.add_argument(
+        "--evaluate-only", action="store_true", help="re-evaluate the runs in experiments/runs/, no training"
+    )
+    args = parser.parse_args()
+    unknown = sorted(set(args.names) - set(PLANT))
     if unknown:
-        sys.exit(f"error: unknown config {', '.join(unknown)}; valid: {', '.join(PLANT)}")
-    main(names or list(PLANT), evaluate_only)
+        parser.error(f"unknown config {', '.join(unknown)}; valid: {', '.join(PLANT)}")
+    main(args.names or list(PLANT), args.evaluate_only)
