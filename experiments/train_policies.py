@@ -117,11 +117,15 @@ def main(names: list[str], evaluate_only: bool = False) -> None:
             )
             print(rows[-1], flush=True)
     path = HERE / "results" / "rl_training.md"
-    if path.exists():  # keep the rows of the configs not rerun this time
-        old = [row for row in path.read_text().splitlines()[len(header) :] if row.startswith("| ")]
+    tail: list[str] = []
+    if path.exists():  # keep the rows of the configs not rerun this time, and the sections after
+        lines = path.read_text().splitlines()[len(header) :]
+        cut = next((i for i, line in enumerate(lines) if line.startswith("## ")), len(lines))
+        tail = ["", *lines[cut:]] if cut < len(lines) else []  # launcher_rl.py's section
+        old = [row for row in lines[:cut] if row.startswith("| ")]
         rows += [row for row in old if row.split("|")[1].strip() not in names]
     rows.sort(key=lambda row: list(PLANT).index(row.split("|")[1].strip()))
-    path.write_text("\n".join(header + rows) + "\n")
+    path.write_text("\n".join(header + rows + tail) + "\n")
     print(f"wrote {path}")
 
 
