@@ -9,8 +9,9 @@ for and on the full truth. The policy trained on EngineTracking's identified mod
 (the sim-to-real comparison), NozzleTVC's fine-tuned on drawn plants (after the nominal one,
 which it starts from), and the residual policies over a classical design (``*_residual``, and
 EngineTracking's ``*_residual_quiet``, trained with its correction penalized: the "PPO cost"
-column is the residual policy's with its base). Writes experiments/results/rl_training.md; then run
-experiments/launcher_rl.py, which appends the LauncherPitch section.
+column is the residual policy's with its base). Writes experiments/results/rl_training.md, keeping
+the LauncherPitch section experiments/launcher_rl.py appends unless a LauncherPitch config was
+retrained (then rerun launcher_rl.py).
 
     python experiments/train_policies.py [--evaluate-only] [config names ...]
 
@@ -86,6 +87,7 @@ def main(names: list[str], evaluate_only: bool = False) -> None:
         "|---|---|---|---|---|---|---|---|---|",
     ]
     rows = []
+    trained_launcher = False
     for name in names:
         config = load_config(HERE / "configs" / f"{name}.toml")
         out = HERE / "runs" / name
@@ -96,6 +98,7 @@ def main(names: list[str], evaluate_only: bool = False) -> None:
         else:
             summary = train(config, out)
         env_id = config["env"]
+        trained_launcher |= not evaluate_only and env_id == "ssme_envs/LauncherPitch-v0"
         if name in SHIP and not evaluate_only:
             target = HERE.parent / "agents" / "policies" / SHIP[name]
             target.mkdir(parents=True, exist_ok=True)
@@ -122,6 +125,9 @@ def main(names: list[str], evaluate_only: bool = False) -> None:
         lines = path.read_text().splitlines()[len(header) :]
         cut = next((i for i, line in enumerate(lines) if line.startswith("## ")), len(lines))
         tail = ["", *lines[cut:]] if cut < len(lines) else []  # launcher_rl.py's section
+        if tail and trained_launcher:  # that section describes the policies retrained now
+            tail = []
+            print("the LauncherPitch section is left out: run experiments/launcher_rl.py", flush=True)
         old = [row for row in lines[:cut] if row.startswith("| ")]
         rows += [row for row in old if row.split("|")[1].strip() not in names]
     rows.sort(key=lambda row: list(PLANT).index(row.split("|")[1].strip()))

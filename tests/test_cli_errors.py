@@ -503,7 +503,6 @@ def test_ctrl_c_through_an_exec_of_a_string_still_exits_130_under_python_m(tmp_p
     )  # fmt: skip
     assert proc.returncode == 130, proc.stderr
     assert proc.stderr == "error: interrupted (Ctrl-C)\n"
-    assert not (tmp_path / "out").exists()
 
 
 @pytest.mark.parametrize(

@@ -42,15 +42,17 @@ def test_packaged_design_models_are_what_the_pipeline_produces(default_results):
             rtol=1e-6,
         )
         # the structure search's record too: the candidates weighed, their scores and the margin
-        # (the output-error refined scores move by about 1e-7 relative with the BLAS thread count)
+        # (BIC units: the output-error refined scores move by about 1e-3 with the BLAS thread count,
+        # and by up to about 0.7 where a machine's rounding flips a stop of the refinement, whose
+        # tolerance is 1e-3 of the cost; the stale records were 3-17 units off)
         kept, now = packaged.fit["structure"], fresh.fit["structure"]
         assert kept["chosen"] == list(now["chosen"]) and kept["criterion"] == now["criterion"]
         assert [(c["indices"], c["note"]) for c in kept["candidates"]] == [
             (list(c["indices"]), c["note"]) for c in now["candidates"]
         ]
         scores = [[c["criterion"] for c in record["candidates"]] for record in (kept, now)]
-        np.testing.assert_allclose(*scores, rtol=1e-5)
-        assert abs(kept["margin"] - now["margin"]) < 0.5  # BIC units; stale records were 3-17 off
+        np.testing.assert_allclose(*scores, rtol=0, atol=1.0)
+        assert abs(kept["margin"] - now["margin"]) < 1.0
 
 
 def test_design_models_are_close_to_the_truth(default_results):

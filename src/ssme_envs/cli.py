@@ -16,7 +16,6 @@ only once the run has succeeded (see :mod:`ssme_envs.outputs`).
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import textwrap
 from collections.abc import Callable, Sequence
@@ -308,14 +307,12 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _exit(status: int) -> NoReturn:
-    """Exit with ``status``. After Ctrl-C, exit 130 at once (streams flushed; the run's own
-    cleanup has already run): under ``python -m``, CPython ends a process by SIGINT once a
-    KeyboardInterrupt has passed through an ``exec`` or ``eval`` of a string (dataclasses and
-    namedtuples are made so), even one caught long before."""
-    if status == 130:
-        sys.stdout.flush()
-        sys.stderr.flush()
-        os._exit(130)
+    """Exit with ``status``, 130 after Ctrl-C included. Under ``python -m``, CPython ends the
+    process by SIGINT instead when the last ``exec`` or ``eval`` of a string it ran let a
+    KeyboardInterrupt out, even one caught further up (dataclasses and namedtuples are made so:
+    a Ctrl-C while a module defines one). Each such exec clears that record as it starts, so an
+    empty one here does, and the exit then runs the usual cleanup (atexit, process pools)."""
+    exec("")  # a constant, empty string: clears the record (see above)
     raise SystemExit(status)
 
 

@@ -19,7 +19,7 @@ from ssme_envs.outputs import write_text
 
 class UsageError(Exception):
     """A misused command line: :func:`ssme_envs.cli.main` prints ``usage`` (when given), then the
-    one ``error:`` line, and exits with code 2."""
+    one ``error:`` line, and returns the exit code 2."""
 
     def __init__(self, message: str, usage: str = "") -> None:
         super().__init__(message)

@@ -77,7 +77,7 @@ def scenario_table(env_id: str, scenario: str, rows: dict[str, ControllerMetrics
 def plot_scenario(env_id: str, scenario: str, runs: dict[str, Rollout], path: Path) -> None:
     """Responses of the first episode of every controller overlaid: one panel per output (and its
     reference), one per actuator."""
-    from ssme_envs.identification.report import agg_pyplot
+    from ssme_envs.identification.report_figures import agg_pyplot
 
     plt = agg_pyplot()
     layout = layout_of(env_id)

@@ -1,6 +1,7 @@
 """Structure and parameter identification in alpha-canonical form (NASA TM-104422, eqs 9-47).
 
-Any number of inputs and outputs and any observability indices. The steps:
+Any number of inputs and outputs and any observability indices. The steps (2-4, the fit of one
+structure, in :mod:`.alpha_fit`):
 
 1. **Structure** (eqs 28-33): the row-by-row rank search of :mod:`.structure`, then a choice
    among the index sets one or two rank decisions away: each is fitted on the first two thirds

@@ -1,6 +1,6 @@
 """The innovations-form model and the result DSR_e returns, with the model read as a continuous-time
-system and as the J, b, k of a mass-spring joint: apart from the algorithm, since nozzle models
-and reports simulate and read the model without identifying anything."""
+system and as the J, b, k of a mass-spring joint: what the algorithm of :mod:`.subspace` hands
+out, kept apart from it (:mod:`.subspace` re-exports these names)."""
 
 from __future__ import annotations
 
@@ -89,7 +89,7 @@ class InnovationsModel(Dimensions):
 
 @dataclass
 class SubspaceResult:
-    """Outcome of :func:`dsr_e`.
+    """Outcome of :func:`.subspace.dsr_e`.
 
     Attributes
     ----------

@@ -3,10 +3,10 @@
 ``bench_experiment`` (truth simulation at the bench rate, decimated) -> ``NozzleRecord`` ->
 ``identify_nozzle`` -> ``NozzleModel`` (model.json) -> ``validate_nozzle``.
 
-The bench follows the VLS nozzle paper: a PRBS torque keeping the nozzle within about +-3 deg,
-acquisition at 2.5 kHz for 59.8 s, decimation by 20 to Ts = 0.008 s (N = 7476), plus sensor
-noise. The PRBS switches on the 0.008 s grid so that the decimated torque is exactly
-zero-order held; the angle is low-pass filtered (zero-phase FIR) before decimation.
+The bench record (:mod:`.nozzle_bench`) follows the VLS nozzle paper: a PRBS torque keeping the
+nozzle within about +-3 deg, acquisition at 2.5 kHz for 59.8 s, decimation by 20 to Ts = 0.008 s
+(N = 7476), plus sensor noise. This module identifies and validates from any such record, the
+bench's or a user's.
 """
 
 from __future__ import annotations

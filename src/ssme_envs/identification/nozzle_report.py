@@ -15,7 +15,7 @@ from ssme_envs.identification.nozzle_pipeline import (
     simulate_joint,
     simulate_linear_model,
 )
-from ssme_envs.identification.report import agg_pyplot
+from ssme_envs.identification.report_figures import agg_pyplot
 from ssme_envs.identification.subspace import to_continuous
 from ssme_envs.models.nozzle import NozzleCore, NozzleParameters, published_nozzle
 from ssme_envs.outputs import save_figure, write_text

@@ -1,7 +1,7 @@
 """The one state-space type of the package: a discrete linear model ``x+ = A x + B u``, ``y = C x + D u``.
 
 The identification results (:class:`~ssme_envs.models.statespace.AlphaCanonicalModel`,
-:class:`~ssme_envs.identification.subspace.InnovationsModel`) convert to it with
+:class:`~ssme_envs.identification.innovations_model.InnovationsModel`) convert to it with
 ``state_space()``, and the controllers' design models (:class:`agents.plants.LinearDesign`) hold
 one, so that a controller designed on any of them reads the same four matrices.
 """
