@@ -19,7 +19,7 @@ from agents.mpc import MPC
 from agents.pid import DecoupledPI, PlacedPID, ScheduledPI
 from agents.plants import DESIGN_SOURCES
 from agents.policy_files import ALGOS
-from agents.shipped import POLICY_VARIANTS
+from agents.shipped import POLICY_VARIANTS, shipped_policy
 from agents.tvc import HysteresisCompensated
 from ssme_envs.envs.catalogue import ENVS
 
@@ -66,7 +66,7 @@ def _robust(env: Any, design: str) -> Controller:
 def _shipped_ppo(env: Any, design: str) -> Controller:
     """The PPO policy shipped for the env, trained on its full truth (``design="truth"``) or, for
     EngineTracking, on the identified model (``"identified"``)."""
-    from agents.sb3 import load_trained, policy_controller, shipped_policy
+    from agents.sb3 import load_trained, policy_controller
 
     env_id = env_id_of(env)
     return policy_controller(load_trained(shipped_policy(env_id, design)), env, env_id)

@@ -17,7 +17,6 @@ import math
 import sys
 import time
 import warnings
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
@@ -45,7 +44,7 @@ from agents.run_config import (  # the config's checks live there; re-exported f
     load_config,
     plan_steps,
 )
-from agents.shipped import SHIPPED, env_and_variant
+from agents.shipped import SHIPPED, shipped_policy, shipped_specs  # re-exported for their callers
 
 
 def train(config: dict[str, Any], out: Path, progress: bool = True) -> dict[str, Any]:
@@ -300,25 +299,6 @@ class PolicyController(BatchController):
         normalized = obs.astype(np.float32) if stats is None else stats.normalize(obs)
         action, _ = self.policy.predict(normalized, deterministic=True)
         return np.asarray(action, dtype=np.float64)
-
-
-def shipped_specs(env_id: str) -> dict[str, Path]:
-    """``{controller spec: directory}`` of the policies shipped for an env: ``ppo`` (trained on its
-    truth) and ``ppo:VARIANT`` for each other (``identified``, ``spread``, ``residual``, ...)."""
-    specs = {}
-    for shipped in SHIPPED:
-        env, variant = env_and_variant(shipped)
-        if env == env_id:
-            specs["ppo" if variant == "truth" else f"ppo:{variant}"] = shipped_policy(env_id, variant)
-    return specs
-
-
-def shipped_policy(env_id: str, trained_on: str = "truth") -> Path:
-    """The directory of the policy shipped for an env, trained on its truth or its identified model."""
-    name = env_id.split("/")[-1] + ("" if trained_on == "truth" else f"-{trained_on}")
-    if name not in SHIPPED:
-        raise ValueError(f"no shipped policy {name!r}; there are {', '.join(SHIPPED)}")
-    return Path(str(resources.files("agents") / "policies" / name))
 
 
 __all__ = [

@@ -23,7 +23,7 @@ from pathlib import Path
 import tomllib
 
 from agents import parse_controller
-from agents.sb3 import shipped_specs
+from agents.shipped import shipped_specs
 from ssme_envs.evaluation import evaluate, scenario_names
 from ssme_envs.outputs import write_text
 from ssme_envs.pipelines import report_plan

@@ -29,6 +29,7 @@ from pathlib import Path
 from agents import parse_controller
 from agents.sb3 import load_config, train
 from ssme_envs.evaluation import SCENARIOS, evaluate
+from ssme_envs.outputs import write_text
 
 HERE = Path(__file__).resolve().parent
 SHIP = {
@@ -131,7 +132,7 @@ def main(names: list[str], evaluate_only: bool = False) -> None:
         old = [row for row in lines[:cut] if row.startswith("| ")]
         rows += [row for row in old if row.split("|")[1].strip() not in names]
     rows.sort(key=lambda row: list(PLANT).index(row.split("|")[1].strip()))
-    path.write_text("\n".join(header + rows + tail) + "\n")
+    write_text(path, "\n".join(header + rows + tail) + "\n")
     print(f"wrote {path}")
 
 

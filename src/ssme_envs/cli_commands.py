@@ -29,7 +29,7 @@ class UsageError(Exception):
 def evaluate_choices() -> str:
     """The envs, their scenarios and controllers, from where they are defined (evaluate --help)."""
     from agents import controller_names
-    from agents.sb3 import shipped_specs
+    from agents.shipped import shipped_specs
     from ssme_envs.evaluation import SCENARIOS
 
     lines = ["envs, their scenarios (default: all) and controllers (default: all; NAME:truth designs on"]
