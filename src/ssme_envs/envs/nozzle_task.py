@@ -335,7 +335,8 @@ class NozzleTask:
         d = a - prev
         terminated = abs(x) > self.envelope
         reward = -self.error_weight * (e * e) - self.rate_weight * (d * d)
-        reward = reward - (self.step_cost_bound * (self.horizon - t + 1)) * terminated
+        if ops.any(terminated):  # the penalty's passes only on the steps that need them (else - 0.0)
+            reward = reward - (self.step_cost_bound * (self.horizon - t + 1)) * terminated
         return m, e, integral, reward, terminated
 
     def nonfinite_reward(self, t: Any) -> Any:
