@@ -14,7 +14,7 @@ from ssme_envs.envs.engine_nonlinear_plant import NonlinearPlantCore, nonlinear_
 from ssme_envs.envs.references import (
     Fault,
     check_reference,
-    normal_rows,
+    normal_pairs,
     reference_signals,
     uniforms_needed,
 )
@@ -234,8 +234,7 @@ class EngineTask:
         episode's length. The noise of channel c, step s is row c (horizon + 1) + s of the
         Box-Muller normals of the first 2 (horizon + 1) uniforms."""
         length = self.horizon + 1
-        rows = [(c * length + start, c * length + stop) for c in (0, 1)]
-        noise = np.stack([normal_rows(uniforms, length, *block) for block in rows])
+        noise = normal_pairs(uniforms, length, start, stop)  # channel 0 the cosine rows, 1 the sine
         return self.references(uniforms[2 * length :], start, stop), noise
 
     def references(self, uniforms: np.ndarray, start: int, stop: int) -> np.ndarray:

@@ -239,22 +239,54 @@ def normal_rows(uniforms: np.ndarray, half: int, start: int, stop: int) -> np.nd
 
     Elementwise float32 work on contiguous copies (numpy's SIMD loops then give every element
     the same bits wherever it sits): an env drawn alone gets the same bits as in a batch, and a
-    block of rows the same bits as the whole."""
-    rows = []
-    if start < half:  # the cosine rows
-        rows.append(_box_muller(uniforms, half, start, min(stop, half), np.cos))
-    if stop > half:  # the sine rows
-        rows.append(_box_muller(uniforms, half, max(start, half) - half, stop - half, np.sin))
-    return rows[0] if len(rows) == 1 else np.concatenate(rows)
+    block of rows the same bits as the whole. Cosine and sine rows of overlapping pairs share
+    their radii and angles."""
+    parts = []  # (wave, first pair, end pair), in row order
+    if start < half:
+        parts.append((np.cos, start, min(stop, half)))
+    if stop > half:
+        parts.append((np.sin, max(start, half) - half, stop - half))
+    out = np.empty((stop - start, *uniforms.shape[1:]), dtype=np.float32)
+    lo, hi = min(p[1] for p in parts), max(p[2] for p in parts)
+    shared = _radius_and_angle(uniforms, half, lo, hi) if _overlap(parts) else None
+    row = 0
+    for wave, first, end in parts:
+        if shared is None:
+            radius, angle = _radius_and_angle(uniforms, half, first, end)
+        else:
+            radius, angle = (a[first - lo : end - lo] for a in shared)
+        _waves(wave, radius, angle, out[row : row + end - first])
+        row += end - first
+    return out
 
 
-def _box_muller(uniforms: np.ndarray, half: int, start: int, stop: int, wave: np.ufunc) -> np.ndarray:
-    """``R(u_i) wave(2 pi u_half+i)`` for the pairs i in [start, stop)."""
+def normal_pairs(uniforms: np.ndarray, half: int, start: int, stop: int) -> np.ndarray:
+    """The cosine and sine normals of the pairs [start, stop): rows [start, stop) and [half +
+    start, half + stop) of ``unit_normals(uniforms[: 2 half])`` (see :func:`normal_rows`), (2,
+    stop - start, ...) float32, each pair's radius and angle computed once."""
+    out = np.empty((2, stop - start, *uniforms.shape[1:]), dtype=np.float32)
+    radius, angle = _radius_and_angle(uniforms, half, start, stop)
+    _waves(np.cos, radius, angle, out[0])
+    _waves(np.sin, radius, angle, out[1])
+    return out
+
+
+def _overlap(parts: list) -> bool:
+    return len(parts) == 2 and parts[0][1] < parts[1][2] and parts[1][1] < parts[0][2]
+
+
+def _radius_and_angle(
+    uniforms: np.ndarray, half: int, start: int, stop: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """``R(u_i)`` and ``2 pi u_half+i`` for the pairs i in [start, stop), float32."""
     radius = np.log1p(-np.ascontiguousarray(uniforms[start:stop], dtype=np.float32))  # 1 - u in (0, 1]
     radius *= -2.0
     np.sqrt(radius, out=radius)
     angular = np.ascontiguousarray(uniforms[half + start : half + stop], dtype=np.float32)
-    angle = angular * np.float32(2.0 * np.pi)  # a new array: the uniforms may be the caller's
-    normals = wave(angle, out=angle)
-    normals *= radius
-    return normals
+    return radius, angular * np.float32(2.0 * np.pi)  # a new array: the uniforms may be the caller's
+
+
+def _waves(wave: np.ufunc, radius: np.ndarray, angle: np.ndarray, out: np.ndarray) -> None:
+    """``out = radius wave(angle)``, in place."""
+    wave(angle, out=out)
+    out *= radius
