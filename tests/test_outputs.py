@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import stat
 import subprocess
 import sys
 
@@ -66,6 +67,23 @@ def test_atomic_write_onto_a_directory_fails_and_leaves_no_temporary(tmp_path):
     with pytest.raises(IsADirectoryError):
         write_text(tmp_path / "taken", "x")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["taken"]
+
+
+def test_atomic_write_refuses_a_special_file_and_writes_through_a_symlink(tmp_path):
+    fifo = tmp_path / "fifo"
+    os.mkfifo(fifo)
+    with pytest.raises(OutputError, match="is not a regular file"):
+        write_text(fifo, "x")
+    assert stat.S_ISFIFO(fifo.stat().st_mode)
+    with pytest.raises(OutputError, match="is not a regular file"):
+        write_text("/dev/null", "x")  # not replaced, even by root
+    assert stat.S_ISCHR(os.stat("/dev/null").st_mode)
+    target, link = tmp_path / "target.md", tmp_path / "link.md"
+    target.write_text("old")
+    link.symlink_to(target)
+    write_text(link, "new")
+    assert link.is_symlink() and target.read_text() == "new"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["fifo", "link.md", "target.md"]
 
 
 def test_save_figure_writes_a_png(tmp_path):

@@ -49,7 +49,8 @@ def atomic_write(path: str | Path, mode: str = "w") -> Iterator[IO[Any]]:
     Parameters
     ----------
     path : str or Path
-        The file to (re)place; its directory must exist.
+        The file to (re)place; its directory must exist. A symlink is followed (its target is
+        replaced); a device, FIFO or socket raises :class:`OutputError`.
     mode : {"w", "wb"}
         Text (UTF-8) or binary.
 
@@ -61,7 +62,10 @@ def atomic_write(path: str | Path, mode: str = "w") -> Iterator[IO[Any]]:
     """
     if mode not in ("w", "wb"):
         raise ValueError(f"mode must be 'w' or 'wb', got {mode!r}")
-    path = Path(path)
+    path = Path(os.path.realpath(path))  # through a symlink: its target is the file replaced
+    if path.exists() and not path.is_file() and not path.is_dir():  # a directory: the rename fails
+        # renaming over a device, FIFO or socket would replace it (as root, /dev/null too)
+        raise OutputError(f"{path} exists and is not a regular file: refusing to replace it")
     while True:
         tmp = path.with_name(f".{path.name}.{secrets.token_hex(4)}.tmp")
         try:  # mode 0o666: the process umask applies, as for an ordinary open()
