@@ -67,6 +67,18 @@ class Identification:
     method: str
 
 
+def _check_indices(indices: Sequence[int], samples: int, p: int) -> None:
+    """ValueError unless ``indices`` are p positive integers below the record's length (checked
+    before the structure is built: an index of 1e7 would make 1e7 states)."""
+    idx = list(indices)
+    if len(idx) != p:
+        raise ValueError(f"{len(idx)} observability indices given for {p} outputs")
+    if not all(isinstance(v, int | np.integer) and not isinstance(v, bool) and v >= 1 for v in idx):
+        raise ValueError(f"observability indices must be positive integers, got {idx}")
+    if max(idx) >= samples:
+        raise ValueError(f"the record has {samples} samples, observability indices {idx} need more")
+
+
 def _names(names: Sequence[str] | None, count: int, prefix: str) -> tuple[str, ...]:
     return tuple(names) if names is not None else tuple(f"{prefix}{i}" for i in range(count))
 
@@ -188,6 +200,8 @@ def identify(
     out_names = _names(output_names, np.shape(y)[-1] if np.ndim(y) == 2 else 1, "y")
     u, y = check_record(u, y, in_names, out_names)
     names = (in_names, out_names)
+    if indices is not None:
+        _check_indices(indices, u.shape[0], y.shape[1])
 
     search = None
     if indices is None:

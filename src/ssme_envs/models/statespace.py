@@ -185,13 +185,14 @@ class AlphaCanonicalModel(Dimensions):
         self.C = as_matrix(self.C, "C", (None, n))
         m, p = self.B.shape[1], self.C.shape[0]
         self.dt = check_dt(self.dt)
-        structure = AlphaStructure.from_indices(self.observability_indices)
-        self.observability_indices = structure.indices
-        if structure.n_outputs != p or structure.n_states != n:
+        indices = tuple(self.observability_indices)
+        if len(indices) != p or sum(int(v) for v in indices) != n:  # before the structure is built:
+            # a corrupt file's 1e9 would make a tuple of 1e9 states
             raise ValueError(
-                f"observability_indices {list(structure.indices)} need {structure.n_outputs} outputs "
-                f"and {structure.n_states} states, the matrices have {p} and {n}"
+                f"observability_indices {list(indices)} need {len(indices)} outputs and "
+                f"{sum(int(v) for v in indices)} states, the matrices have {p} and {n}"
             )
+        self.observability_indices = AlphaStructure.from_indices(indices).indices
         self.lam = np.asarray(self.lam, dtype=float).reshape(-1)
         if self.lam.shape != (m,) or not np.all(np.isfinite(self.lam)):
             raise ValueError(f"lambda must hold {m} finite gains, got {self.lam.tolist()}")
