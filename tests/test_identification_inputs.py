@@ -4,6 +4,7 @@ that do not fit the record, and model files that claim impossible structures."""
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -76,3 +77,14 @@ def test_a_model_file_claiming_a_billion_states_is_refused_before_building_them(
         ValueError, match=r"observability_indices \[1000000000, 2\] need 2 outputs and 1000000002"
     ):
         engine_model_from_dict(AlphaCanonicalModel, data, "model.json")
+
+
+@pytest.mark.parametrize("normalization", [1e20, 1e30])
+def test_a_normalization_that_rounds_the_hysteresis_away_is_refused(normalization):
+    from ssme_envs.identification.bouc_wen import _table1_form
+    from ssme_envs.models.nozzle import published_nozzle
+
+    normalized = published_nozzle("bouc_wen").normalized()
+    assert _table1_form(normalized, 0.35).normalized() == pytest.approx(normalized, rel=1e-12)
+    with pytest.raises(ValueError, match=re.escape(f"normalization A = {normalization:g} cannot hold")):
+        _table1_form(normalized, normalization)

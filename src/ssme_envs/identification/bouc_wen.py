@@ -30,6 +30,7 @@ The record must start at rest at the zero of the angle (deviations from the rest
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 
@@ -311,7 +312,7 @@ def _assess(
     determined = fit >= MIN_FIT_PERCENT and p_value < 1e-3 and not loose
     return BoucWenFit(
         determined=determined,
-        params=NozzleParameters.from_normalized(**normalized, A=normalization_A) if determined else None,
+        params=_table1_form(normalized, normalization_A) if determined else None,
         linear=linear,
         normalized=normalized,
         relative_std=relative_std,
@@ -330,3 +331,22 @@ def _assess(
             "substeps": substeps,  # of the final refinement
         },
     )
+
+
+def _table1_form(normalized: dict[str, float], normalization_A: float) -> NozzleParameters:
+    """The joint in Table 1's form under ``normalization_A``, or ValueError when that A rounds a
+    part of it away (A = 1e20 made a = 1: the hysteresis gone from the stored model)."""
+    joint = NozzleParameters.from_normalized(**normalized, A=normalization_A)
+    back = joint.normalized()
+    lost = [
+        key
+        for key in ("k_el", "k_hys", "beta_n", "gamma_n")
+        if not math.isclose(back[key], normalized[key], rel_tol=1e-6)
+    ]
+    if lost:
+        raise ValueError(
+            f"the normalization A = {normalization_A:g} cannot hold the identified joint in Table 1's "
+            f"form ({', '.join(f'{key} {normalized[key]:g} -> {back[key]:g}' for key in lost)}); "
+            "choose an A nearer the hysteresis scale (default 0.35)"
+        )
+    return joint
