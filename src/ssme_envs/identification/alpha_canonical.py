@@ -48,6 +48,7 @@ from ssme_envs.identification.structure import (
     DEFAULT_RANK_TOL,
     Candidate,
     StructureSearch,
+    check_search_length,
     explore,
 )
 from ssme_envs.identification.structure import estimate_indices as structure_search
@@ -150,6 +151,9 @@ def estimate_indices(
     output_names, input_names : sequences of str, optional
         Used in error messages.
     """
+    # the record's length first (with the inputs alone, the fewest features): a short record is
+    # the problem to name before what its inputs allow
+    check_search_length(u.shape[0], y.shape[1], u.shape[1], max_index)
     gamma = _binary_amplitudes(u, input_names) if asymmetric else np.full(u.shape[1], np.nan)
     return structure_search(_input_features(u, gamma, asymmetric), y, max_index, rank_tol, output_names)
 

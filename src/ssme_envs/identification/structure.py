@@ -151,6 +151,21 @@ def lagged(x: np.ndarray, lags: Sequence[int], start: int) -> np.ndarray:
     return np.hstack([x[start - lag : horizon - lag] for lag in lags])
 
 
+def check_search_length(horizon: int, p: int, n_feat: int, window: int) -> tuple[int, int]:
+    """(first usable sample, instrument depth) of a structure search up to index ``window`` on
+    ``horizon`` samples of ``p`` outputs and ``n_feat`` input features, or ValueError when the
+    record is too short for it."""
+    depth = max(window, -(-p * window // n_feat))
+    start = window + depth
+    needed = (window * n_feat + 1) + depth * n_feat + window * p
+    if horizon - start < 2 * needed:
+        raise ValueError(
+            f"the record has {horizon} samples; a structure search up to index {window} needs at "
+            f"least {start + 2 * needed} (use a longer record or a smaller max_index)"
+        )
+    return start, depth
+
+
 def instrumented_rows(feats: np.ndarray, y: np.ndarray, window: int) -> np.ndarray:
     """The past outputs with the window's inputs removed, projected on older inputs (orthonormal
     coordinates): column ``k p + i`` carries the row ``c_i A^k``.
@@ -166,14 +181,7 @@ def instrumented_rows(feats: np.ndarray, y: np.ndarray, window: int) -> np.ndarr
     """
     horizon, p = y.shape
     n_feat = feats.shape[1]
-    depth = max(window, -(-p * window // n_feat))
-    start = window + depth
-    needed = (window * n_feat + 1) + depth * n_feat + window * p
-    if horizon - start < 2 * needed:
-        raise ValueError(
-            f"the record has {horizon} samples; a structure search up to index {window} needs at "
-            f"least {start + 2 * needed} (use a longer record or a smaller max_index)"
-        )
+    start, depth = check_search_length(horizon, p, n_feat, window)
     r_block = np.hstack([lagged(feats, range(1, window + 1), start), np.ones((horizon - start, 1))])
     z_block = lagged(feats, range(window + 1, window + depth + 1), start)
     q_block = lagged(y, range(window, 0, -1), start)
