@@ -112,6 +112,8 @@ def parse_controller(spec: str, env_id: str, allow_pickle: bool = False) -> Call
         Accept ``algo:FILE.zip``, an SB3 zip: it is unpickled on load, which can execute
         arbitrary code.
     """
+    if not isinstance(spec, str):
+        raise TypeError(f"a controller spec is a string such as 'lqi' or 'ppo:RUN_DIR', got {spec!r}")
     name, _, design = spec.partition(":")
     if name in ALGOS and design and design not in (*DESIGN_SOURCES, *POLICY_VARIANTS):
         return _trained(name, design, env_id, allow_pickle)

@@ -340,6 +340,9 @@ def _load_state(policy: Any, tensors: dict[str, Any], path: Path) -> None:
         if tensors[key].shape != value.shape or tensors[key].dtype != value.dtype:
             raise ValueError(f"{path}: {key} is {tensors[key].dtype} {tuple(tensors[key].shape)}, "
                              f"the policy needs {value.dtype} {tuple(value.shape)}")  # fmt: skip
+        if tensors[key].is_floating_point() and not bool(tensors[key].isfinite().all()):
+            # the SHA-256 only says the file is the one recorded; NaN would fail later, far from here
+            raise ValueError(f"{path}: {key} holds non-finite weights (NaN or inf)")
     policy.load_state_dict(tensors, strict=True)
     policy.set_training_mode(False)
 

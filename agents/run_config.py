@@ -9,6 +9,7 @@ import math
 from pathlib import Path
 from typing import Any
 
+from agents.hyperparameters import check_hyperparameters
 from agents.policy_files import algorithm_class as _algorithm
 from agents.residual import check_residual
 
@@ -37,6 +38,9 @@ CONFIG_KEYS = {
 DEFAULTS = {"steps": 200_000, "seed": 0, "num_envs": 64, "eval_freq": 50_000, "eval_episodes": 20,
             "tensorboard": False, "env_options": {}, "hyperparameters": {}, "policy": {}}  # fmt: skip
 RESIDUAL_SCALE = 0.5  # the residual's default action scale
+# policy.net_arch bounds: far beyond what these envs need (64 x 64 does), and a layer of MAX_UNITS
+# squared float32 weights (64 MiB, times the optimizer's copies) still fits any machine that trains
+MAX_LAYERS, MAX_UNITS = 16, 4096
 
 
 def check_config(config: dict[str, Any], source: str = "config") -> dict[str, Any]:
@@ -57,18 +61,12 @@ def check_config(config: dict[str, Any], source: str = "config") -> dict[str, An
     for key in ("steps", "num_envs", "eval_freq", "eval_episodes"):
         if full[key] < 1:
             raise ValueError(f"{source}: {key} must be positive, got {full[key]}")
-    algorithm = _algorithm(full["algo"])
-    signature = inspect.signature(algorithm.__init__).parameters
-    reserved = {"self", "policy", "env", "seed", "device", "verbose", "tensorboard_log", "policy_kwargs"}
-    for key, value in full["hyperparameters"].items():
-        if key not in signature or key in reserved:
-            raise ValueError(f"{source}: hyperparameters.{key} is not a {full['algo']} hyperparameter")
-        default = signature[key].default
-        if isinstance(default, bool) and not isinstance(value, bool):
-            raise ValueError(f"{source}: hyperparameters.{key} must be true or false, got {value!r}")
-        if isinstance(default, int | float) and not isinstance(default, bool):
-            if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-                raise ValueError(f"{source}: hyperparameters.{key} must be a number, got {value!r}")
+    accepted = inspect.signature(_algorithm(full["algo"]).__init__).parameters
+    check_hyperparameters(full["algo"], full["hyperparameters"], accepted, source)
+    starts = full["hyperparameters"].get("learning_starts", 0)
+    if starts >= full["steps"]:  # SAC and TD3 would only collect: a policy that never trained
+        raise ValueError(f"{source}: hyperparameters.learning_starts {starts} leaves none of the "
+                         f"{full['steps']} steps to learn from")  # fmt: skip
     for key, value in full["policy"].items():
         if key == "log_std_init":  # the initial exploration noise, log of its std (PPO's Gaussian)
             if full["algo"] != "ppo":
@@ -80,8 +78,13 @@ def check_config(config: dict[str, Any], source: str = "config") -> dict[str, An
             continue
         if key != "net_arch":
             raise ValueError(f"{source}: unknown key policy.{key}; known: net_arch, log_std_init")
-        if not (isinstance(value, list) and value and all(isinstance(v, int) and v > 0 for v in value)):
-            raise ValueError(f"{source}: policy.net_arch must be a list of positive integers, got {value!r}")
+        if not (
+            isinstance(value, list)
+            and 0 < len(value) <= MAX_LAYERS
+            and all(type(v) is int and 0 < v <= MAX_UNITS for v in value)
+        ):
+            raise ValueError(f"{source}: policy.net_arch must be a list of 1 to {MAX_LAYERS} layer sizes, "
+                             f"each 1 to {MAX_UNITS} units, got {value!r}")  # fmt: skip
     if "residual" in full:
         scale = full.get("residual_scale", RESIDUAL_SCALE)
         checked = check_residual(full["residual"], scale, full["env"], f"{source}: residual")
@@ -177,6 +180,8 @@ def plan_steps(config: dict[str, Any]) -> tuple[int, dict[str, Any], str | None]
 __all__ = [
     "CONFIG_KEYS",
     "DEFAULTS",
+    "MAX_LAYERS",
+    "MAX_UNITS",
     "RESIDUAL_SCALE",
     "check_config",
     "config_toml",

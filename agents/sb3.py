@@ -37,7 +37,13 @@ from agents.policy_files import (
 )
 from agents.policy_files import algorithm_class as _algorithm
 from agents.policy_zip import load_sb3_zip
-from agents.residual import Residual, ResidualController, base_controller, residual_vec_env
+from agents.residual import (
+    Residual,
+    ResidualController,
+    base_controller,
+    residual_space,
+    residual_vec_env,
+)
 from agents.run_config import (  # the config's checks live there; re-exported for callers of agents.sb3
     check_config,
     config_toml,
@@ -47,7 +53,7 @@ from agents.run_config import (  # the config's checks live there; re-exported f
 from agents.shipped import SHIPPED, shipped_policy, shipped_specs  # re-exported for their callers
 
 
-def train(config: dict[str, Any], out: Path, progress: bool = True) -> dict[str, Any]:
+def train(config: dict[str, Any], out: Path, progress: bool = True, source: str = "config") -> dict[str, Any]:
     """Train on the env's native vector env through the SB3 adapter, observations (and rewards)
     normalized by VecNormalize, and keep the policy of the best evaluation (the final policy
     is evaluated too; every evaluation runs the same ``eval_episodes`` episodes). Writes
@@ -63,6 +69,8 @@ def train(config: dict[str, Any], out: Path, progress: bool = True) -> dict[str,
         The run directory (created).
     progress : bool
         Show SB3's progress bar (tqdm and rich) and print the evaluations, on stderr.
+    source : str
+        Where the config came from, to begin its error messages (``config PATH``).
 
     Returns
     -------
@@ -76,7 +84,7 @@ def train(config: dict[str, Any], out: Path, progress: bool = True) -> dict[str,
     from ssme_envs.envs.sb3_adapter import make_sb3_vec_env
     from ssme_envs.evaluation import check_env_id
 
-    config = check_config(config)
+    config = check_config(config, source)
     check_env_id(config["env"])
     if config["tensorboard"] and importlib.util.find_spec("tensorboard") is None:
         raise ValueError('TensorBoard logs need the tensorboard package: pip install "ssme-envs[rl]"')
@@ -106,7 +114,7 @@ def train(config: dict[str, Any], out: Path, progress: bool = True) -> dict[str,
         evaluation = VecNormalize(vec_env(config["eval_episodes"], seed + 100_000), training=False,
                                   norm_reward=False)  # fmt: skip
     except TypeError as exc:  # an option the env does not take
-        raise ValueError(f"env_options: {exc}") from None
+        raise ValueError(f"{source}: env_options: {exc}") from None
     policy_kwargs = dict(config["policy"]) or None
     try:
         model = _algorithm(algo)(
@@ -114,9 +122,11 @@ def train(config: dict[str, Any], out: Path, progress: bool = True) -> dict[str,
             tensorboard_log=str(out / "tensorboard") if config["tensorboard"] else None, **hyper,
         )  # fmt: skip
     except (AssertionError, ValueError) as exc:  # SB3 checks hyperparameter values with asserts
-        raise ValueError(f"hyperparameters: {exc}") from None
-    except TypeError as exc:  # an argument the algorithm's policy does not take
-        raise ValueError(f"hyperparameters or policy: {exc}") from None
+        raise ValueError(f"{source}: hyperparameters: {exc}") from None
+    except Exception as exc:  # building the model only runs the config's values: what the checks
+        # above let through and SB3 or torch refuse here is the config's doing, not a bug to trace
+        raise ValueError(f"{source}: hyperparameters or policy: cannot build the {algo} model "
+                         f"({type(exc).__name__}: {exc})") from None  # fmt: skip
     if "init_policy" in config:
         _start_from(model, venv, config["init_policy"], algo, env_id, residual)
     history: list[dict[str, Any]] = []
@@ -181,6 +191,7 @@ def _start_from(
             return "no residual" if r is None else f"a residual over {r.base} (scale {r.scale:g})"
 
         raise ValueError(f"init_policy {path}: it is {said(loaded.residual)}, this config {said(residual)}")
+    check_spaces(loaded, model.policy.observation_space, model.policy.action_space, env_id)
     mine, theirs = model.policy.state_dict(), loaded.policy.state_dict()
     if {k: v.shape for k, v in mine.items()} != {k: v.shape for k, v in theirs.items()}:
         raise ValueError(f"init_policy {path}: its network differs from policy.net_arch of this config")
@@ -238,8 +249,12 @@ def load_trained(path: str | Path, algo: str | None = None, allow_pickle: bool =
 def policy_controller(loaded: LoadedPolicy, env: Any, env_id: str) -> BatchController:
     """A loaded policy as the controller of ``env``: a :class:`PolicyController`, or for a residual
     policy the :class:`~agents.residual.ResidualController` over its base designed for ``env``."""
+    # a native vector env (the evaluation harness's) has the spaces of one env as single_*
+    observation_space = getattr(env, "single_observation_space", env.observation_space)
+    action_space = getattr(env, "single_action_space", env.action_space)
     controller = PolicyController(loaded)
     if loaded.residual is None:
+        check_spaces(loaded, observation_space, action_space, env_id)
         return controller
     from agents.base import task_of
 
@@ -248,8 +263,25 @@ def policy_controller(loaded: LoadedPolicy, env: Any, env_id: str) -> BatchContr
     if controller.size != expected:
         raise ValueError(f"{loaded.source}: a residual policy on {controller.size} observations; {env_id} "
                          f"with its base action gives {expected}")  # fmt: skip
+    n_actions = int(np.prod(action_space.shape))
+    check_spaces(loaded, residual_space(observation_space, n_actions), action_space, env_id)
     base = base_controller(loaded.residual, env, env_id)
     return ResidualController(controller, base, loaded.residual.scale)
+
+
+def check_spaces(loaded: LoadedPolicy, observation_space: Any, action_space: Any, env_id: str) -> None:
+    """ValueError unless the policy's recorded observation and action spaces are the ones given (of
+    the env it is to act on): same shape, low and high. SB3 clips or rescales a policy's actions to
+    its own action space, so other bounds would act wrongly without any error."""
+    pairs = (("observation", loaded.policy.observation_space, observation_space),
+             ("action", loaded.policy.action_space, action_space))  # fmt: skip
+    for what, mine, theirs in pairs:
+        same = mine.shape == getattr(theirs, "shape", None) and all(
+            np.allclose(getattr(mine, bound), getattr(theirs, bound), rtol=1e-6, atol=0)
+            for bound in ("low", "high")
+        )  # float32 and float64 spaces of one env agree to float32's precision
+        if not same:
+            raise ValueError(f"{loaded.source}: the policy's {what} space {mine} is not {env_id}'s {theirs}")
 
 
 class PolicyController(BatchController):
@@ -306,6 +338,7 @@ __all__ = [
     "SHIPPED",
     "PolicyController",
     "check_config",
+    "check_spaces",
     "load_config",
     "load_trained",
     "plan_steps",

@@ -4,6 +4,7 @@ shared study); their parsers and what they run."""
 from __future__ import annotations
 
 import argparse
+import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -75,13 +76,14 @@ def train_command(args: argparse.Namespace) -> int:
     config.update({k: v for k, v in overrides.items() if v is not None})
     if args.tensorboard:
         config["tensorboard"] = True
-    config = check_config(config, str(args.config or "options"))
+    source = f"config {args.config}" if args.config is not None else "options"
+    config = check_config(config, source)
     check_env_id(config["env"])  # before the output directory is made
     check_training(config)
     created = not args.out.exists()
     _make_dir(args.out)
     try:
-        summary = train(config, args.out)
+        summary = train(config, args.out, source=source)
     except BaseException:
         if created and not any(args.out.iterdir()):  # refused before writing: leave nothing behind
             args.out.rmdir()
@@ -100,14 +102,27 @@ def train_command(args: argparse.Namespace) -> int:
 def tune_command(args: argparse.Namespace) -> int:
     from ssme_envs import tuning
 
-    if args.out is not None and (args.out.is_dir() or not args.out.parent.is_dir()):
-        raise ValueError(f"--out {args.out}: must be a file in an existing directory")
+    if args.out is not None:
+        _check_out_file(args.out)  # before the trials: their hours are not lost to a late refusal
     study = tuning.tune(args.env, args.algo, args.storage, args.study, args.trials, args.timesteps,
                         args.seed, args.num_envs, args.evaluations, args.eval_episodes)  # fmt: skip
     print(tuning.summary(study))
     if args.out is not None:
         print(f"wrote {tuning.write_best_config(study, args.out)}")
     return 0
+
+
+def _check_out_file(path: Path) -> None:
+    """ValueError unless ``path`` can be written as :func:`ssme_envs.outputs.write_text` writes it:
+    a file (not a directory) whose directory exists and takes a new file (tried, not guessed from
+    permission bits, which neither root nor a read-only mount honour)."""
+    if path.is_dir() or not path.parent.is_dir():
+        raise ValueError(f"--out {path}: must be a file in an existing directory")
+    try:
+        with tempfile.NamedTemporaryFile(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp"):
+            pass
+    except OSError as exc:
+        raise ValueError(f"--out {path}: cannot write in {path.parent} ({exc.strerror})") from None
 
 
 def _make_dir(path: Path) -> None:

@@ -25,6 +25,7 @@ shared study is not reproducible bit for bit; a single worker on a fresh study i
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import socket
@@ -50,8 +51,8 @@ EVAL_SEED = 1_000_000  # first evaluation episode: apart from the harness's seed
 
 def open_storage(url: str) -> Any:
     """The Optuna storage of ``journal:PATH`` (a journal file) or of an RDB URL; ValueError
-    naming the problem (unknown form, missing directory, database unreachable or its driver
-    not installed)."""
+    naming the problem (unknown form, missing directory, a file that is not an Optuna journal,
+    database unreachable or its driver not installed)."""
     import optuna
 
     if not isinstance(url, str) or not url:
@@ -64,7 +65,14 @@ def open_storage(url: str) -> Any:
             raise ValueError(f"--storage {url}: directory {path.parent} does not exist")
         from optuna.storages.journal import JournalFileBackend
 
-        return optuna.storages.JournalStorage(JournalFileBackend(str(path)))
+        _check_journal_lines(path, url)
+        try:  # Optuna replays the records at once, trusting their fields
+            return optuna.storages.JournalStorage(JournalFileBackend(str(path)))
+        except OSError:
+            raise  # the CLI names the file and the reason
+        except Exception as exc:
+            raise ValueError(f"--storage {url}: {path} is not a readable Optuna journal (replaying it "
+                             f"failed: {type(exc).__name__}: {exc})") from None  # fmt: skip
     import sqlalchemy
 
     try:
@@ -80,6 +88,27 @@ def open_storage(url: str) -> Any:
         raise ValueError(f"--storage {url}: the database driver is not installed ({exc})") from None
     except (sqlalchemy.exc.SQLAlchemyError, ValueError) as exc:
         raise ValueError(f"--storage {url}: cannot open the database ({str(exc).splitlines()[0]})") from None
+
+
+def _check_journal_lines(path: Path, url: str) -> None:
+    """ValueError unless every line of the journal at ``path`` (if any) is a JSON object. Optuna
+    stops only at the line after a broken one, maybe after this worker has appended to the file or
+    mid-study; an unfinished last line is another worker's record being appended (Optuna's own
+    reading skips it), so it only has to start as one does."""
+    if not path.is_file():
+        return
+    with path.open("rb") as fh:
+        for number, line in enumerate(fh, start=1):
+            if not line.endswith(b"\n"):
+                problem = None if line.startswith(b"{") else "not a JSON record"
+            else:
+                try:
+                    problem = None if isinstance(json.loads(line), dict) else "not a JSON object"
+                except ValueError as exc:  # JSONDecodeError, UnicodeDecodeError
+                    problem = str(exc)
+            if problem is not None:
+                raise ValueError(f"--storage {url}: {path} is not a readable Optuna journal "
+                                 f"(line {number}: {problem})")  # fmt: skip
 
 
 def _study(storage: Any, name: str, attrs: dict[str, Any], seed: int) -> Any:

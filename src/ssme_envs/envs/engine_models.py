@@ -9,23 +9,42 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from ssme_envs.envs.task import check_number, check_numbers
 from ssme_envs.models.engine import POWER_LEVELS, TruthConfig, identified_model, published_model
 from ssme_envs.models.linked import LinkedEngineModel
 from ssme_envs.models.statespace import AlphaCanonicalModel
 
+# normalized output units: the largest reference step and sensor bias the engine envs take are
+# 0.05 (5 % of rated Pc or MR, five times the default step); noise of a larger standard deviation
+# buries every reference and bias in it (and 1e154 squares to an infinite reward)
+MAX_SENSOR_NOISE = 0.05
+# normalized valve travel: the widest command swing of the largest action_scale (+-0.2); a valve
+# whose dead band (backlash or stick band) is wider never moves, whatever the action
+MAX_DEAD_BAND = 0.4
+
 
 def resolve_truth(truth: TruthConfig | Mapping[str, Any] | None) -> TruthConfig:
-    """A TruthConfig from one, from a dict of its fields, or the default."""
+    """A TruthConfig from one, from a dict of its fields, or the default; its effects' widths and
+    noise checked against the bounds above (ValueError naming the field)."""
     if truth is None:
         return TruthConfig()
     if isinstance(truth, TruthConfig):
-        return truth
-    if isinstance(truth, Mapping):
+        fields = {name: getattr(truth, name) for name in TruthConfig.__dataclass_fields__}
+    elif isinstance(truth, Mapping):
         unknown = sorted(set(truth) - set(TruthConfig.__dataclass_fields__))
         if unknown:
             raise ValueError(f"truth: unknown option(s) {', '.join(unknown)}")
-        return TruthConfig(**truth)
-    raise ValueError(f"truth must be a TruthConfig or a dict, got {type(truth).__name__}")
+        fields = dict(truth)
+    else:
+        raise ValueError(f"truth must be a TruthConfig or a dict, got {type(truth).__name__}")
+    # checked before TruthConfig's own checks, which raise OverflowError on an int like 10**400;
+    # numpy numbers become floats, which TruthConfig takes
+    for name in ("backlash", "stiction"):
+        if name in fields:
+            fields[name] = check_number(f"truth {name}", fields[name], 0.0, MAX_DEAD_BAND)
+    if "sensor_noise" in fields:
+        check_numbers("truth sensor_noise", fields["sensor_noise"], 2, 0.0, MAX_SENSOR_NOISE)
+    return truth if isinstance(truth, TruthConfig) else TruthConfig(**fields)
 
 
 def resolve_plant(plant: str | Path | AlphaCanonicalModel, power: float) -> AlphaCanonicalModel:

@@ -9,7 +9,7 @@ from typing import Any, ClassVar, NamedTuple
 
 import numpy as np
 
-from ssme_envs.envs.engine_models import design_model, resolve_plant, resolve_truth
+from ssme_envs.envs.engine_models import MAX_SENSOR_NOISE, design_model, resolve_plant, resolve_truth
 from ssme_envs.envs.engine_nonlinear_plant import NonlinearPlantCore, nonlinear_engine_of, nonlinear_task
 from ssme_envs.envs.references import (
     Fault,
@@ -18,7 +18,16 @@ from ssme_envs.envs.references import (
     reference_signals,
     uniforms_needed,
 )
-from ssme_envs.envs.task import Carrier, Observation, Schedule, Value
+from ssme_envs.envs.task import (
+    Carrier,
+    Observation,
+    Schedule,
+    Value,
+    check_number,
+    check_numbers,
+    real_number,
+    shown,
+)
 from ssme_envs.models.engine import TruthConfig, check_stable_plant, output_coupling
 from ssme_envs.models.engine_nonlinear import NonlinearEngine
 from ssme_envs.models.engine_step import (
@@ -28,7 +37,7 @@ from ssme_envs.models.engine_step import (
     step_arrays,
     valves_pair_floats,
 )
-from ssme_envs.models.linked import LinkedEngineModel
+from ssme_envs.models.linked import POWER_RANGE, LinkedEngineModel
 from ssme_envs.models.statespace import AlphaCanonicalModel
 
 ENGINE_OBSERVATION = Observation(
@@ -37,6 +46,12 @@ ENGINE_OBSERVATION = Observation(
     units=("%", "%", "%", "%", "%", "%", "% s", "% s", "-", "-"),
     high=(50.0, 50.0, 50.0, 50.0, 100.0, 100.0, 100.0, 100.0, 1.0, 1.0),
 )  # fmt: skip
+
+# the sample times an engine model.json may have: the references hold levels for whole seconds
+# (at least 2 steps each up to 0.5 s; round(1 / dt) is 0 from 2 s), and an episode's draws and
+# tables grow with its steps (1e-9 s asked 74 GiB at reset); the packaged models have 0.04 s
+MIN_DT, MAX_DT = 1e-3, 0.5
+MAX_EPISODE_STEPS = 1_000_000  # 3600 s episodes down to dt = 3.6 ms
 
 
 class EnginePlant(NamedTuple):
@@ -111,7 +126,10 @@ class EngineTask:
         episode_seconds: float = 10.0,
         action_scale: float = 0.02,
     ) -> EngineTask:
-        power = LinkedEngineModel.check_power(power)
+        number, (low, high) = real_number(power), POWER_RANGE  # a huge int is inf (float() overflows)
+        if number is None or not np.isfinite(number):
+            raise ValueError(f"power must be a number of % within {low:g}-{high:g}, got {shown(power)}")
+        power = LinkedEngineModel.check_power(number)
         engine = nonlinear_engine_of(plant)
         if engine is not None:  # the point model's task with the nonlinear engine as its plant
             linear = cls.build(power=power, truth=truth, reference=reference, fault=fault,
@@ -133,34 +151,22 @@ class EngineTask:
         check_stable_plant(model)
         config = resolve_truth(truth)
         check_reference(reference)
-        try:
-            amplitude = np.broadcast_to(np.asarray(reference_amplitude, dtype=float), (2,)).copy()
-        except (TypeError, ValueError):
+        amplitude = check_numbers("reference_amplitude", reference_amplitude, 2, 0.0, 0.05)
+        episode_seconds = check_number("episode_seconds", episode_seconds, 1.0, 3600.0)
+        action_scale = check_number("action_scale", action_scale, 0.0, 0.2, low_open=True)
+        noise = check_numbers("truth sensor_noise", config.sensor_noise, 2, 0.0, MAX_SENSOR_NOISE)
+        # dt out of range first: round() of an episode over a tiny dt would overflow
+        if not MIN_DT <= model.dt <= MAX_DT or round(episode_seconds / model.dt) > MAX_EPISODE_STEPS:
             raise ValueError(
-                f"reference_amplitude must be one number or two, got {reference_amplitude!r}"
-            ) from None
-        if not np.all(np.isfinite(amplitude)) or np.any(amplitude < 0) or np.any(amplitude > 0.05):
-            raise ValueError(
-                f"reference_amplitude must be within 0-0.05 (normalized), got {reference_amplitude!r}"
+                f"plant dt must be within {MIN_DT:g}-{MAX_DT:g} s and an episode (episode_seconds / dt) "
+                f"at most {MAX_EPISODE_STEPS} steps, got dt={model.dt:g} s for {episode_seconds:g} s"
             )
-        if not (isinstance(episode_seconds, int | float) and 1.0 <= episode_seconds <= 3600.0):
-            raise ValueError(f"episode_seconds must be within 1-3600 s, got {episode_seconds!r}")
-        if not (isinstance(action_scale, int | float) and 0 < action_scale <= 0.2):
-            raise ValueError(
-                f"action_scale must be within (0, 0.2] normalized valve travel, got {action_scale!r}"
-            )
-        try:
-            noise = np.broadcast_to(np.atleast_1d(np.asarray(config.sensor_noise, dtype=float)), (2,)).copy()
-        except ValueError:
-            raise ValueError(
-                f"truth sensor_noise must be one number or two, got {config.sensor_noise!r}"
-            ) from None
         return cls(
             params=StepParameters.from_model(model, config),
             n_states=model.A.shape[0],
             dt=model.dt,
             horizon=round(episode_seconds / model.dt),
-            action_scale=float(action_scale),
+            action_scale=action_scale,
             amplitude=amplitude,
             reference=reference,
             noise_std=noise,

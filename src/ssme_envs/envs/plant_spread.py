@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from ssme_envs.envs.references import normal_rows
+from ssme_envs.envs.task import check_number, real_number, shown
 from ssme_envs.models.nozzle_joint import NozzleParameters, RK4Parameters, rk4_parameters
 from ssme_envs.models.nozzle_model import NozzleModel
 from ssme_envs.models.uncertainty import PSD_TOL
@@ -187,21 +188,18 @@ def resolve_spread(
 ) -> PlantSpread | None:
     """The spread an env option asks for: None (or 0), a relative spread, or ``"uncertainty"``
     (the model.json's covariance; ``plant`` a model path, a model, or an identified preset)."""
-    if plant_spread is None or (isinstance(plant_spread, int | float) and plant_spread == 0):
+    # checked whether used or not: a typo in it is never silently ignored
+    scale = check_number("uncertainty_scale", uncertainty_scale, 0.0, 100.0, low_open=True)
+    if plant_spread is None:
         return None
     if isinstance(plant_spread, str):
         if plant_spread != "uncertainty":
             raise ValueError(f"plant_spread must be a number or 'uncertainty', got {plant_spread!r}")
-        if not (isinstance(uncertainty_scale, int | float) and 0 < uncertainty_scale <= 100):
-            raise ValueError(f"uncertainty_scale must be a number in (0, 100], got {uncertainty_scale!r}")
-        return PlantSpread.from_model(joint, _model_of(plant), float(uncertainty_scale))
-    if (
-        isinstance(plant_spread, bool)
-        or not isinstance(plant_spread, int | float)
-        or not math.isfinite(plant_spread)
-    ):
-        raise ValueError(f"plant_spread must be a number or 'uncertainty', got {plant_spread!r}")
-    return PlantSpread.relative_spread(joint, float(plant_spread))
+        return PlantSpread.from_model(joint, _model_of(plant), scale)
+    spread = real_number(plant_spread)  # numpy numbers as floats; an int too large for one is inf
+    if spread is None or not math.isfinite(spread):
+        raise ValueError(f"plant_spread must be a number or 'uncertainty', got {shown(plant_spread)}")
+    return None if spread == 0 else PlantSpread.relative_spread(joint, spread)
 
 
 def _model_of(plant: Any) -> NozzleModel:

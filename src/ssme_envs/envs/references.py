@@ -15,10 +15,15 @@ from typing import Any
 
 import numpy as np
 
+from ssme_envs.envs.task import real_number, shown
+
 REFERENCE_KINDS = ("random_steps", "step", "ramp", "prbs", "sine_sweep", "attitude", "zero", "mixed")
 # what a "mixed" episode draws from, with equal probability
 MIXED_KINDS = ("random_steps", "step", "ramp", "sine_sweep", "attitude")
 FAULT_KINDS = ("stuck_valve", "sensor_bias", "gain_loss")
+# s: no env's episode is longer (3600 s at most); refused here, a later (or infinite) time would
+# overflow the rounding to a step before the env's own "beyond the episode" check
+MAX_FAULT_TIME = 3600.0
 
 
 def check_reference(kind: str) -> str:
@@ -208,22 +213,31 @@ class Fault:
             return None
         if fault.kind not in FAULT_KINDS:
             raise ValueError(f"unknown fault kind {fault.kind!r}; choose one of {', '.join(FAULT_KINDS)}")
-        if not isinstance(fault.time, int | float) or not np.isfinite(fault.time) or fault.time < 0:
-            raise ValueError(f"fault time must be a number of seconds >= 0, got {fault.time!r}")
+        time = real_number(fault.time)
+        if time is None or not 0.0 <= time <= MAX_FAULT_TIME:  # NaN fails the comparisons
+            raise ValueError(
+                f"fault time must be a number of seconds in 0-{MAX_FAULT_TIME:g}, got {shown(fault.time)}"
+            )
         limit = n_outputs if fault.kind == "sensor_bias" else n_valves
-        if not isinstance(fault.index, int) or not 0 <= fault.index < limit:
-            raise ValueError(f"fault index must be an integer in 0..{limit - 1}, got {fault.index!r}")
-        if not isinstance(fault.magnitude, int | float) or not np.isfinite(fault.magnitude):
-            raise ValueError(f"fault magnitude must be a finite number, got {fault.magnitude!r}")
-        if fault.kind == "sensor_bias" and abs(fault.magnitude) > 0.05:
+        index = fault.index
+        if (
+            isinstance(index, bool | np.bool_)
+            or not isinstance(index, int | np.integer)
+            or not 0 <= index < limit
+        ):
+            raise ValueError(f"fault index must be an integer in 0..{limit - 1}, got {shown(index)}")
+        magnitude = real_number(fault.magnitude)
+        if magnitude is None or not np.isfinite(magnitude):
+            raise ValueError(f"fault magnitude must be a finite number, got {shown(fault.magnitude)}")
+        if fault.kind == "sensor_bias" and abs(magnitude) > 0.05:
             raise ValueError(
-                f"sensor_bias magnitude is a normalized deviation within +-0.05, got {fault.magnitude!r}"
+                f"sensor_bias magnitude is a normalized deviation within +-0.05, got {shown(fault.magnitude)}"
             )
-        if fault.kind == "gain_loss" and not 0.0 <= fault.magnitude <= 1.0:
+        if fault.kind == "gain_loss" and not 0.0 <= magnitude <= 1.0:
             raise ValueError(
-                f"gain_loss magnitude is the remaining gain, within 0-1, got {fault.magnitude!r}"
+                f"gain_loss magnitude is the remaining gain, within 0-1, got {shown(fault.magnitude)}"
             )
-        return fault
+        return cls(fault.kind, time, int(index), magnitude)  # numpy numbers as Python ones
 
 
 def unit_normals(uniforms: np.ndarray) -> np.ndarray:

@@ -10,6 +10,7 @@ and in a batch (the tests hold the vector env to gymnasium's ``SyncVectorEnv`` b
 from __future__ import annotations
 
 import math
+import reprlib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, NamedTuple, Protocol, runtime_checkable
@@ -190,13 +191,48 @@ def transpose_into(table: np.ndarray, out: np.ndarray, tile: int = 256) -> np.nd
     return out
 
 
+def real_number(value: Any) -> float | None:
+    """``value`` as a float if it is a real number (a Python or numpy int or float, not a bool),
+    else None; an int too large for a float is +-inf, so that the callers' finite checks refuse it
+    (``float()`` raises OverflowError)."""
+    if isinstance(value, bool | np.bool_) or not isinstance(value, int | float | np.integer | np.floating):
+        return None
+    try:
+        return float(value)
+    except OverflowError:
+        return math.inf if value > 0 else -math.inf
+
+
+def shown(value: Any) -> str:
+    """``repr(value)`` cut to a readable length for a message (a 10**400 has 401 digits)."""
+    return reprlib.repr(value)
+
+
 def check_number(name: str, value: Any, low: float, high: float, low_open: bool = False) -> float:
-    """``value`` as a float, or ValueError unless a finite number within [low, high] (or (low, high])."""
-    ok = isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
-    if not ok or value > high or value < low or (low_open and value == low):
+    """``value`` as a float, or ValueError unless a finite real number (numpy's included, not a
+    bool) within [low, high] (or (low, high])."""
+    number = real_number(value)
+    if (
+        number is None
+        or not math.isfinite(number)
+        or not low <= number <= high
+        or (low_open and number == low)
+    ):
         bracket = "(" if low_open else "["
-        raise ValueError(f"{name} must be a number in {bracket}{low:g}, {high:g}], got {value!r}")
-    return float(value)
+        raise ValueError(f"{name} must be a number in {bracket}{low:g}, {high:g}], got {shown(value)}")
+    return number
+
+
+def check_numbers(name: str, value: Any, count: int, low: float, high: float) -> np.ndarray:
+    """One number for every channel, or ``count`` numbers (a list, tuple or array), each checked
+    by :func:`check_number`: a float array of ``count``, or ValueError naming ``name``."""
+    if isinstance(value, np.ndarray):
+        value = value.tolist()  # Python numbers (bools stay bools: refused)
+    values = list(value) if isinstance(value, list | tuple) else [value]
+    if len(values) not in (1, count):
+        raise ValueError(f"{name} must be one number or {count}, got {shown(value)}")
+    numbers = [check_number(name, each, low, high) for each in values]
+    return np.array(numbers * (count // len(numbers)), dtype=float)
 
 
 __all__ = [
@@ -211,7 +247,10 @@ __all__ = [
     "TrackingTask",
     "adopt",
     "check_number",
+    "check_numbers",
     "next_stop",
+    "real_number",
     "set_columns",
+    "shown",
     "transpose_into",
 ]

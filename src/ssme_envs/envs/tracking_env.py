@@ -10,6 +10,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from ssme_envs.envs.inputs import action_floats, check_seed
 from ssme_envs.envs.rendering import close_figure, render_history
 from ssme_envs.envs.task import CLIP_UFUNC, FLOATS, next_stop
 
@@ -61,7 +62,10 @@ class TrackingEnv(gym.Env):
     names its task constructor (``build_task``) and what it draws (``output_names``,
     ``display_scale``, ``display_units``); the actuators are the task's ``action_names``.
 
-    ``reset`` takes no options (``None`` or ``{}``; anything else raises). ``step`` after the
+    ``reset`` takes no options (``None`` or ``{}``; anything else raises) and a seed that is an
+    integer >= 0 or None (else TypeError or ValueError). ``step`` takes ``n_actions`` real numbers:
+    a real array, a list or a tuple (bools, complex numbers, strings or dicts raise
+    :class:`~ssme_envs.envs.inputs.ActionTypeError`, a TypeError). ``step`` after the
     episode ended (terminated or truncated), or before the first ``reset``, raises
     :class:`EpisodeOverError`: call ``reset`` first. A step whose reward comes out NaN or
     infinite ends the episode where the task gives a ``nonfinite_reward`` (see NozzleTVC-v0)."""
@@ -102,7 +106,7 @@ class TrackingEnv(gym.Env):
     def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[np.ndarray, dict]:
         """Seed, draw the episode as the vector env does; the first observation and ``{}``."""
         check_reset_options(options, self.reset_options, type(self).__name__)
-        gym.Env.reset(self, seed=seed)
+        gym.Env.reset(self, seed=check_seed(seed, type(self).__name__))
         self._ended = ""
         task = self.task
         self._uniforms = self.np_random.random(task.draw_size, dtype=np.float32)[:, None]
@@ -158,17 +162,9 @@ class TrackingEnv(gym.Env):
         return out, float(reward), terminated, truncated, info
 
     def _action_values(self, action: Any) -> list[float]:
-        """The action as ``n_actions`` Python floats, or ValueError."""
-        n = self.task.n_actions
-        try:
-            if len(action) != n:
-                raise ValueError
-            return [float(a) for a in action]
-        except (TypeError, ValueError, IndexError):
-            meaning = self.action_meaning or ", ".join(self.task.action_names)
-            raise ValueError(
-                f"action must be {n} number{'s' if n > 1 else ''} ({meaning}), got {action!r}"
-            ) from None
+        """The action as ``n_actions`` Python floats (:func:`~ssme_envs.envs.inputs.action_floats`)."""
+        meaning = self.action_meaning or ", ".join(self.task.action_names)
+        return action_floats(action, self.task.n_actions, meaning)
 
     def _extend(self) -> tuple[np.ndarray, np.ndarray]:
         """Compute the episode's next block of steps (``next_stop``) as the vector env does;

@@ -26,6 +26,7 @@ from gymnasium.vector.utils import batch_space
 
 from ssme_envs.envs.engine_task import EngineTask
 from ssme_envs.envs.engine_throttle import ThrottleTask
+from ssme_envs.envs.inputs import batch_actions, check_seeds
 from ssme_envs.envs.launcher_pitch import LauncherTask
 from ssme_envs.envs.nozzle_task import NozzleTask
 from ssme_envs.envs.sub_env import SubEnv, reset_mask
@@ -52,12 +53,12 @@ class TrackingVectorEnv(VectorEnv):
       and steps none: the scalar env raises it after ``terminated`` or ``truncated``, and
       ``SyncVectorEnv`` refuses the step with an ``AssertionError`` (a base of that error).
 
-    ``reset(seed=..., options=...)``: ``seed`` an int (sub-env ``i`` gets ``seed + i``), a list
-    of ``num_envs`` ints or Nones, or None. ``options`` None, ``{}`` or ``{"reset_mask": mask}``
-    (a bool array of shape ``(num_envs,)`` with at least one True): only the masked sub-envs
-    reset (with their entries of ``seed``), the others keep their episodes and their last
-    observations. Any other option raises ValueError (TypeError for a mask or ``options`` of
-    the wrong type), as the scalar env does.
+    ``reset(seed=..., options=...)``: ``seed`` an int >= 0 (sub-env ``i`` gets ``seed + i``), a
+    list of ``num_envs`` such ints or Nones, or None, all checked first. ``options`` None, ``{}``
+    or ``{"reset_mask": mask}`` (a bool array of shape ``(num_envs,)`` with at least one True):
+    only the masked sub-envs reset (with their entries of ``seed``), the others keep their
+    episodes and their last observations. Any other option raises ValueError (TypeError for a
+    mask or ``options`` of the wrong type), as the scalar env does.
 
     A sub-env whose step went non-finite (the nozzle and launcher tasks' ``nonfinite_reward``)
     ends its episode as the scalar env does: terminated, finite reward and observation, and
@@ -80,10 +81,12 @@ class TrackingVectorEnv(VectorEnv):
         max_episode_steps: int | None = None,
         **options: Any,
     ) -> None:
-        if not isinstance(num_envs, int) or num_envs < 1:
+        if isinstance(num_envs, bool) or not isinstance(num_envs, int) or num_envs < 1:
             raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
         if max_episode_steps is not None and (
-            not isinstance(max_episode_steps, int) or max_episode_steps < 1
+            isinstance(max_episode_steps, bool)
+            or not isinstance(max_episode_steps, int)
+            or max_episode_steps < 1
         ):
             raise ValueError(f"max_episode_steps must be a positive integer, got {max_episode_steps!r}")
         if render_mode is not None:
@@ -235,12 +238,7 @@ class TrackingVectorEnv(VectorEnv):
         """Start new episodes in every sub-env, or only in those of ``options["reset_mask"]``
         (see the class docs); the observations of every sub-env and ``{}``."""
         mask = reset_mask(options, self.num_envs, type(self).__name__)
-        if seed is None:
-            seed = [None] * self.num_envs
-        elif isinstance(seed, int):
-            seed = [seed + i for i in range(self.num_envs)]
-        if len(seed) != self.num_envs:
-            raise ValueError(f"seed must be an int or {self.num_envs} seeds, got {len(seed)}")
+        seed = check_seeds(seed, self.num_envs, type(self).__name__)  # all, before any is used
         envs = self._rows if mask is None or mask.all() else np.flatnonzero(mask)
         for i in envs:
             if seed[i] is not None:
@@ -257,7 +255,7 @@ class TrackingVectorEnv(VectorEnv):
         """One step of every sub-env; (observations, rewards, terminated, truncated, infos)."""
         acts = actions  # float32 or float64 as given: cast once, into the clipped rows below
         if not isinstance(acts, np.ndarray) or acts.dtype not in _FLOATS:
-            acts = np.asarray(actions, dtype=np.float64)
+            acts = batch_actions(actions)  # real numbers only: not complex, bools or strings
         shape = (self.num_envs, self.task.n_actions)
         if acts.shape != shape:
             raise ValueError(f"actions must have shape {shape}, got {acts.shape}")

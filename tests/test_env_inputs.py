@@ -1,0 +1,380 @@
+"""Bad input to the envs (options, model files, seeds, actions) raises ValueError or TypeError
+naming the problem: never another exception type, an infinite reward or a silently wrong result."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import ssme_envs.models
+from ssme_envs.models.engine import TruthConfig
+from ssme_envs.models.nozzle import NOZZLE_DT
+
+TRACKING = "ssme_envs/EngineTracking-v0"
+THROTTLE = "ssme_envs/EngineThrottle-v0"
+NOZZLE = "ssme_envs/NozzleTVC-v0"
+LAUNCHER = "ssme_envs/LauncherPitch-v0"
+ENGINES = (TRACKING, THROTTLE)
+DATA = Path(ssme_envs.models.__file__).parent / "data"
+FEW = settings(max_examples=25, deadline=None)
+
+huge_ints = st.integers(min_value=2**1024, max_value=10**400) | st.integers(
+    min_value=-(10**400), max_value=-(2**1024)
+)
+not_numbers = st.sampled_from(["abc", "1", b"1", None, [1.0], {"a": 1}, 1 + 0j, object(), True, False])
+
+
+def vector(env_id: str, num_envs: int = 2, **options) -> gym.vector.VectorEnv:
+    return gym.make_vec(env_id, num_envs=num_envs, vectorization_mode="vector_entry_point", **options)
+
+
+def engine_model_file(tmp_path: Path, dt: float) -> Path:
+    """The packaged identified engine model.json with its sample time replaced."""
+    model = json.loads((DATA / "engine_identified_100.json").read_text())
+    model["dt"] = dt
+    path = tmp_path / f"model_{dt!r}.json"
+    path.write_text(json.dumps(model))
+    return path
+
+
+# 1. the truth's noise (and the valves' dead bands) within physical bounds
+
+
+@FEW
+@given(noise=st.floats(min_value=0.0501, max_value=1e308) | huge_ints | st.just(True))
+def test_truth_sensor_noise_beyond_the_bound_is_refused(noise):
+    for env_id in ENGINES:
+        for truth in ({"sensor_noise": noise}, {"sensor_noise": [1e-4, noise]}):
+            with pytest.raises(ValueError, match="truth sensor_noise"):
+                gym.make(env_id, truth=truth)
+    with pytest.raises(ValueError, match="truth sensor_noise"):
+        vector(TRACKING, truth={"sensor_noise": noise})
+
+
+def test_truth_noise_at_its_bound_gives_finite_rewards_and_a_config_is_checked_too():
+    env = gym.make(TRACKING, truth={"sensor_noise": 0.05})
+    env.reset(seed=0)
+    for _ in range(5):
+        _, reward, *_ = env.step(np.zeros(2))
+        assert math.isfinite(reward)
+    with pytest.raises(ValueError, match="truth sensor_noise"):
+        gym.make(TRACKING, truth=TruthConfig(sensor_noise=1e154))
+    for name in ("backlash", "stiction"):
+        for width in (0.5, 1e308, 10**400):
+            with pytest.raises(ValueError, match=f"truth {name}"):
+                gym.make(TRACKING, truth={name: width})
+    gym.make(TRACKING, truth={"backlash": np.float32(1e-3), "stiction": np.float64(1e-4)})
+
+
+# 2. an engine model.json's sample time
+
+
+@pytest.mark.parametrize("dt", [2.0, 1.0, 0.6, 1e-9, 5e-324])
+def test_engine_model_with_an_unusable_dt_is_refused_when_built(tmp_path, dt):
+    path = engine_model_file(tmp_path, dt)
+    for make in (lambda: gym.make(TRACKING, plant=str(path)), lambda: vector(TRACKING, plant=str(path))):
+        with pytest.raises(ValueError, match=r"plant dt must be within .* steps"):
+            make()
+
+
+def test_engine_model_dt_bounds_and_episode_steps(tmp_path):
+    fine = gym.make(TRACKING, plant=str(engine_model_file(tmp_path, 0.5))).unwrapped
+    assert fine.task.horizon == 20
+    fine.reset(seed=0)
+    fine.step(np.zeros(2))
+    assert gym.make(TRACKING, plant=str(engine_model_file(tmp_path, 0.001))).unwrapped.task.horizon == 10_000
+    with pytest.raises(ValueError, match=r"at most 1000000 steps, got dt=0.001 s for 3600 s"):
+        gym.make(TRACKING, plant=str(engine_model_file(tmp_path, 0.001)), episode_seconds=3600.0)
+
+
+@pytest.mark.parametrize("env_id", [NOZZLE, LAUNCHER])
+def test_a_nozzle_model_files_dt_never_reaches_the_env(tmp_path, env_id):
+    model = json.loads((DATA / "nozzle_identified.json").read_text())
+    for dt in (5.0, 1e-9):
+        model["linear"]["dt"] = dt
+        path = tmp_path / "nozzle.json"
+        path.write_text(json.dumps(model))
+        env = gym.make(env_id, plant=str(path)).unwrapped
+        reference = gym.make(env_id, plant=str(DATA / "nozzle_identified.json")).unwrapped
+        assert env.task.dt == reference.task.dt and env.task.horizon == reference.task.horizon
+    assert gym.make(NOZZLE, plant=str(path)).unwrapped.task.dt == NOZZLE_DT
+
+
+# 3. seeds
+
+
+@FEW
+@given(seed=st.integers(max_value=-1))
+def test_negative_seeds_are_value_errors(seed):
+    env = gym.make(TRACKING).unwrapped
+    with pytest.raises(ValueError, match="Seed must be greater or equal to zero"):
+        env.reset(seed=seed)
+    venv = vector(TRACKING)
+    for bad in (seed, [1, seed], [seed, None]):
+        with pytest.raises(ValueError, match="Seed must be greater or equal to zero"):
+            venv.reset(seed=bad)
+
+
+@FEW
+@given(
+    seed=st.floats(allow_nan=True)
+    | st.text(max_size=3)
+    | st.sampled_from([True, False, np.bool_(True), b"1"])
+)
+def test_seeds_that_are_not_integers_are_type_errors(seed):
+    env = gym.make(NOZZLE).unwrapped
+    with pytest.raises(TypeError, match="Seed must be an integer"):
+        env.reset(seed=seed)
+    venv = vector(NOZZLE)
+    for bad in (seed, [2, seed]):
+        with pytest.raises(TypeError, match="Seed must be an integer"):
+            venv.reset(seed=bad)
+
+
+def test_seed_errors_are_still_gymnasiums_errors_for_callers_that_caught_those():
+    env = gym.make(TRACKING).unwrapped
+    for bad in (-1, "a", 1.5):
+        with pytest.raises(gym.error.Error):
+            env.reset(seed=bad)
+
+
+def test_a_bad_seed_in_a_list_reseeds_no_sub_env():
+    venv = vector(TRACKING, num_envs=3)
+    venv.reset(seed=7)
+    seeds, states = venv.np_random_seed, [rng.bit_generator.state for rng in venv.np_random]
+    for bad in ([1, 2, -1], [1, 2, "a"], [1, True, 3]):
+        with pytest.raises((TypeError, ValueError)):
+            venv.reset(seed=bad)
+    assert venv.np_random_seed == seeds
+    assert [rng.bit_generator.state for rng in venv.np_random] == states
+
+
+def test_numpy_integer_seeds_are_accepted_as_ints():
+    a, b = gym.make(TRACKING).unwrapped, gym.make(TRACKING).unwrapped
+    np.testing.assert_array_equal(a.reset(seed=np.int64(3))[0], b.reset(seed=3)[0])
+    assert a.np_random_seed == 3
+    va, vb = vector(TRACKING), vector(TRACKING)
+    np.testing.assert_array_equal(va.reset(seed=np.uint32(5))[0], vb.reset(seed=5)[0])
+    np.testing.assert_array_equal(va.reset(seed=np.array([8, 9]))[0], vb.reset(seed=[8, 9])[0])
+    assert va.np_random_seed == (8, 9)
+
+
+# 4. numbers too large for a float
+
+
+@pytest.mark.parametrize(
+    ("env_id", "name"),
+    [
+        (TRACKING, "power"),
+        (TRACKING, "reference_amplitude"),
+        (TRACKING, "episode_seconds"),
+        (TRACKING, "action_scale"),
+        (NOZZLE, "episode_seconds"),
+        (NOZZLE, "sensor_noise"),
+        (NOZZLE, "actuator_lag"),
+        (NOZZLE, "rate_limit"),
+        (NOZZLE, "plant_spread"),
+        (NOZZLE, "reference_amplitude_deg"),
+        (NOZZLE, "uncertainty_scale"),
+        (LAUNCHER, "instability"),
+        (LAUNCHER, "effectiveness"),
+        (LAUNCHER, "sensor_noise"),
+    ],
+)
+@FEW
+@given(value=huge_ints)
+def test_ints_too_large_for_a_float_are_value_errors_naming_the_option(env_id, name, value):
+    with pytest.raises(ValueError, match=name):
+        gym.make(env_id, **{name: value})
+
+
+@pytest.mark.parametrize("env_id", [TRACKING, THROTTLE, NOZZLE, LAUNCHER])
+@FEW
+@given(time=st.floats(min_value=3600.5, allow_infinity=True) | huge_ints | st.just(math.nan))
+def test_fault_times_far_beyond_any_episode_are_value_errors(env_id, time):
+    with pytest.raises(ValueError, match="fault time"):
+        gym.make(env_id, fault={"kind": "sensor_bias", "time": time})
+
+
+@FEW
+@given(value=huge_ints, index=st.integers(0, 1))
+def test_actions_too_large_for_a_float_are_value_errors(value, index):
+    env = gym.make(TRACKING).unwrapped
+    env.reset(seed=0)
+    action = [0, 0]
+    action[index] = value
+    with pytest.raises(ValueError, match="too large for a float"):
+        env.step(action)
+    env.step([0, 0])  # nothing changed: the episode goes on
+    venv = vector(TRACKING)
+    venv.reset(seed=0)
+    with pytest.raises(ValueError, match="too large for a float"):
+        venv.step([action, [0, 0]])
+
+
+# 5. actions that are not real numbers
+
+WRONG_ACTIONS = [
+    {0: 0.3, 1: -0.5},
+    b"ab",
+    "ab",
+    np.array(["1", "0"]),
+    ["1", "0"],
+    {0.1, 0.2},
+    range(2),
+    np.array([True, False]),
+    [True, False],
+    [np.bool_(True), 0.0],
+    np.array([1 + 0j, 0]),
+    [1 + 0j, 0.0],
+    [None, 0.0],
+    np.array([0.1, 0.2], dtype=object),
+    iter([0.1, 0.2]),
+]
+
+
+@FEW
+@given(action=st.sampled_from(WRONG_ACTIONS))
+def test_the_scalar_env_refuses_actions_that_are_not_real_numbers(action):
+    env = gym.make(TRACKING).unwrapped
+    env.reset(seed=0)
+    with pytest.raises(TypeError, match=r"action must be 2 numbers \(OPOV, FPOV\)"):
+        env.step(action)
+
+
+@FEW
+@given(
+    action=st.sampled_from(
+        [
+            np.full((2, 2), 0.5 + 1j),
+            np.full((2, 2), 0.5 + 0j),
+            np.ones((2, 2), bool),
+            [["1", "0"], ["0", "0"]],
+            {0: [0.1, 0.2]},
+            np.full((2, 2), "0.5"),
+            [[None, 0.0], [0.0, 0.0]],
+        ]
+    )
+)
+def test_the_vector_env_refuses_actions_that_are_not_real_numbers(action):
+    venv = vector(TRACKING)
+    venv.reset(seed=0)
+    with pytest.raises(TypeError, match="actions must be real numbers"):
+        venv.step(action)
+
+
+@FEW
+@given(values=st.lists(st.floats(-2.0, 2.0) | st.integers(-2, 2), min_size=2, max_size=2))
+def test_real_numbers_in_any_accepted_form_act_as_the_float_array(values):
+    forms = [
+        list(values),
+        tuple(values),
+        [np.float32(v) if isinstance(v, float) else np.int64(v) for v in values],
+        np.array(values, dtype=np.float64),
+    ]
+    if all(isinstance(v, int) for v in values):
+        forms.append(np.array(values, dtype=np.int32))
+    for action in forms:
+        env = gym.make(TRACKING).unwrapped
+        env.reset(seed=1)
+        obs, reward, *_ = env.step(action)
+        reference = gym.make(TRACKING).unwrapped
+        reference.reset(seed=1)
+        want = np.array([float(np.float32(v)) if isinstance(v, np.float32) else float(v) for v in action])
+        expected = reference.step(want)
+        np.testing.assert_array_equal(obs, expected[0])
+        assert reward == expected[1]
+
+
+# 6. bools are not numbers; numpy numbers are
+
+
+@pytest.mark.parametrize(
+    ("env_id", "options", "message"),
+    [
+        (TRACKING, {"episode_seconds": True}, "episode_seconds"),
+        (TRACKING, {"reference_amplitude": False}, "reference_amplitude"),
+        (TRACKING, {"reference_amplitude": [0.01, True]}, "reference_amplitude"),
+        (TRACKING, {"truth": {"sensor_noise": True}}, "sensor_noise"),
+        (TRACKING, {"fault": {"kind": "sensor_bias", "time": True}}, "fault time"),
+        (TRACKING, {"fault": {"kind": "sensor_bias", "time": 1.0, "index": True}}, "fault index"),
+        (TRACKING, {"fault": {"kind": "gain_loss", "time": 1.0, "magnitude": True}}, "fault magnitude"),
+        (THROTTLE, {"fault": {"kind": "stuck_valve", "time": 1.0, "index": np.bool_(False)}}, "fault index"),
+        (NOZZLE, {"episode_seconds": True}, "episode_seconds"),
+        (NOZZLE, {"sensor_noise": False}, "sensor_noise"),
+        (LAUNCHER, {"instability": True}, "instability"),
+    ],
+)
+def test_bools_are_refused_where_a_number_is_expected(env_id, options, message):
+    with pytest.raises(ValueError, match=message):
+        gym.make(env_id, **options)
+
+
+def test_bool_num_envs_and_time_limits_are_refused():
+    for options in ({"num_envs": True}, {"num_envs": 2, "max_episode_steps": True}):
+        with pytest.raises(ValueError, match="must be a positive integer"):
+            gym.make_vec(TRACKING, vectorization_mode="vector_entry_point", **options)
+
+
+@pytest.mark.parametrize(
+    ("env_id", "options", "plain"),
+    [
+        (NOZZLE, {"sensor_noise": np.float32(2e-4)}, {"sensor_noise": float(np.float32(2e-4))}),
+        (NOZZLE, {"episode_seconds": np.int64(2)}, {"episode_seconds": 2}),
+        (NOZZLE, {"plant_spread": np.float64(0.1)}, {"plant_spread": 0.1}),
+        (NOZZLE, {"uncertainty_scale": np.float32(2.0)}, {"uncertainty_scale": 2.0}),
+        (LAUNCHER, {"instability": np.float64(4.0)}, {"instability": 4.0}),
+        (
+            TRACKING,
+            {"power": np.float32(90.0), "episode_seconds": np.int64(3)},
+            {"power": 90.0, "episode_seconds": 3},
+        ),
+        (TRACKING, {"reference_amplitude": np.array([0.01, 0.02])}, {"reference_amplitude": (0.01, 0.02)}),
+        (
+            TRACKING,
+            {
+                "fault": {
+                    "kind": "gain_loss",
+                    "time": np.float32(1.0),
+                    "index": np.int64(1),
+                    "magnitude": np.float64(0.5),
+                }
+            },
+            {"fault": {"kind": "gain_loss", "time": 1.0, "index": 1, "magnitude": 0.5}},
+        ),
+    ],
+)
+def test_numpy_numbers_are_accepted_as_python_numbers(env_id, options, plain):
+    env, same = gym.make(env_id, **options).unwrapped, gym.make(env_id, **plain).unwrapped
+    assert env.task.horizon == same.task.horizon
+    for e in (env, same):
+        e.reset(seed=4)
+    for _ in range(3):
+        action = np.full(env.action_space.shape, 0.3)
+        a, b = env.step(action), same.step(action)
+        np.testing.assert_array_equal(a[0], b[0])
+        assert a[1:4] == b[1:4]
+
+
+# 7. uncertainty_scale is checked whether the spread uses it or not
+
+
+@pytest.mark.parametrize("env_id", [NOZZLE, LAUNCHER])
+@FEW
+@given(
+    scale=not_numbers
+    | st.floats().filter(lambda s: not 0 < s <= 100)
+    | st.integers(max_value=0)
+    | st.integers(min_value=101),
+    spread=st.sampled_from([None, 0.0, 0.1]),
+)
+def test_uncertainty_scale_is_always_checked(env_id, scale, spread):
+    with pytest.raises(ValueError, match="uncertainty_scale"):
+        gym.make(env_id, uncertainty_scale=scale, plant_spread=spread)
