@@ -308,3 +308,18 @@ def test_a_controller_spec_that_is_not_a_string_is_a_type_error(tmp_path):
     with pytest.raises(TypeError, match="a controller spec is a string"):
         evaluate_to(tmp_path / "e", NOZZLE, controllers=[None], episodes=1)
     assert not (tmp_path / "e").exists()
+
+
+@pytest.mark.parametrize("controllers", [["zero"], {"zero": None}, {3: lambda env: None}])
+def test_evaluate_refuses_controllers_that_are_not_named_factories(controllers):
+    from ssme_envs.evaluation import evaluate
+
+    with pytest.raises(TypeError, match="controllers"):
+        evaluate("ssme_envs/EngineTracking-v0", controllers, episodes=1)
+
+
+def test_evaluate_to_refuses_one_spec_given_as_a_string(tmp_path):
+    from ssme_envs.pipelines import evaluate_to
+
+    with pytest.raises(TypeError, match="list of controller specs"):
+        evaluate_to(tmp_path / "out", "ssme_envs/EngineTracking-v0", controllers="lqi", episodes=1)

@@ -319,6 +319,18 @@ def _step_response(t: np.ndarray, y: np.ndarray, r: np.ndarray, alive: np.ndarra
     return summary
 
 
+def check_factories(controllers: Any) -> None:
+    """TypeError unless ``controllers`` maps names to factories (callables env -> controller)."""
+    if not isinstance(controllers, Mapping):
+        raise TypeError(
+            "controllers must be a mapping of names to factories env -> controller, "
+            f"got {type(controllers).__name__}"
+        )
+    for name, factory in controllers.items():
+        if not isinstance(name, str) or not callable(factory):
+            raise TypeError(f"controllers: {name!r} must name a factory env -> controller, got {factory!r}")
+
+
 def evaluate(
     env_id: str,
     controllers: Mapping[str, Callable[[Any], Any]],
@@ -355,8 +367,9 @@ def evaluate(
         holds the rollouts.
     """
     check_env_id(env_id)
-    if not isinstance(episodes, int) or episodes < 1:
+    if not isinstance(episodes, int) or isinstance(episodes, bool) or episodes < 1:
         raise ValueError(f"episodes must be a positive integer, got {episodes!r}")
+    check_factories(controllers)
     names = scenario_names(env_id) if scenarios is None else check_scenarios(env_id, scenarios)
     say = progress or (lambda _: None)
     layout = layout_of(env_id)
