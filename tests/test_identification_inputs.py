@@ -4,6 +4,7 @@ that do not fit the record, and model files that claim impossible structures."""
 from __future__ import annotations
 
 import json
+import math
 import re
 
 import numpy as np
@@ -88,3 +89,16 @@ def test_a_normalization_that_rounds_the_hysteresis_away_is_refused(normalizatio
     assert _table1_form(normalized, 0.35).normalized() == pytest.approx(normalized, rel=1e-12)
     with pytest.raises(ValueError, match=re.escape(f"normalization A = {normalization:g} cannot hold")):
         _table1_form(normalized, normalization)
+
+
+def test_a_model_file_with_a_non_finite_figure_names_where_it_is():
+    from ssme_envs.models.statespace import dumps_compact
+
+    with pytest.raises(ValueError, match=r"^fit\.dsr_e\.resonance_frequency_hz holds NaN or inf"):
+        dumps_compact({"A": [[1.0]], "fit": {"dsr_e": {"resonance_frequency_hz": math.inf}}})
+    with pytest.raises(ValueError, match=r"^A holds NaN or inf"):
+        dumps_compact({"A": [[1.0, math.nan]]})
+    assert json.loads(dumps_compact({"A": [[1.0, 2.5]], "fit": {"n": [1, {"k": 2}]}})) == {
+        "A": [[1.0, 2.5]],
+        "fit": {"n": [1, {"k": 2}]},
+    }

@@ -122,25 +122,37 @@ def read_json(path: str | Path) -> Any:
 def dumps_compact(obj: Any) -> str:
     """JSON with one matrix row per line: readable diffs, exact round trip of floats.
 
-    NaN and inf are refused (ValueError): they are not JSON.
+    NaN and inf are refused (ValueError naming where they are): they are not JSON.
     """
 
-    def render(value: Any, indent: int) -> str:
+    def scalar(value: Any, where: str) -> str:
+        try:
+            return json.dumps(value, allow_nan=False)
+        except ValueError:  # the one ValueError of these dumps: a NaN or an infinity
+            raise ValueError(
+                f"{where or 'the value'} holds NaN or inf, which a JSON file cannot store "
+                "(the computation gave a non-finite result on this input: it may not suit this model)"
+            ) from None
+
+    def render(value: Any, indent: int, where: str) -> str:
         pad = " " * indent
         if isinstance(value, dict):
             if not value:
                 return "{}"
-            items = [f"{pad} {json.dumps(k)}: {render(v, indent + 1)}" for k, v in value.items()]
+            items = [
+                f"{pad} {json.dumps(k)}: {render(v, indent + 1, f'{where}.{k}' if where else str(k))}"
+                for k, v in value.items()
+            ]
             return "{\n" + ",\n".join(items) + "\n" + pad + "}"
         if isinstance(value, list) and value and all(isinstance(v, list) for v in value):
-            rows = [f"{pad} {json.dumps(v, allow_nan=False)}" for v in value]
+            rows = [f"{pad} {scalar(v, where)}" for v in value]
             return "[\n" + ",\n".join(rows) + "\n" + pad + "]"
         if isinstance(value, list) and any(isinstance(v, dict) for v in value):
-            rows = [f"{pad} {render(v, indent + 1)}" for v in value]
+            rows = [f"{pad} {render(v, indent + 1, f'{where}[{i}]')}" for i, v in enumerate(value)]
             return "[\n" + ",\n".join(rows) + "\n" + pad + "]"
-        return json.dumps(value, allow_nan=False)
+        return scalar(value, where)
 
-    return render(obj, 0)
+    return render(obj, 0, "")
 
 
 __all__ = [
