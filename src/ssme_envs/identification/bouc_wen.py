@@ -167,6 +167,17 @@ def fit_bouc_wen(
     torque_limit : float
         Torque saturation of the simulated model, N m (the record's torque is already applied).
     """
+    # candidates whose simulation overflows are expected and dropped by their non-finite costs:
+    # numpy's overflow warnings about them are noise (a CLI run printed one before its error)
+    with np.errstate(over="ignore", invalid="ignore"):
+        return _fit_bouc_wen(tau, x, dt, seed, workers, normalization_A, maxiter, popsize, torque_limit)
+
+
+def _fit_bouc_wen(
+    tau: np.ndarray, x: np.ndarray, dt: float, seed: int, workers: int, normalization_A: float,
+    maxiter: int, popsize: int, torque_limit: float,
+) -> BoucWenFit:  # fmt: skip
+    """:func:`fit_bouc_wen`'s work."""
     start = time.perf_counter()
     tau, x = check_torque_record(tau, x)
     dt = check_dt(dt)

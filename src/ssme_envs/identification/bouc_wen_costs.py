@@ -106,6 +106,7 @@ _WORKER: dict[str, _Simulator] = {}
 def _init_worker(simulator: _Simulator) -> None:
     # Ctrl-C goes to the whole process group: the parent handles it and ends the pool.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    np.seterr(over="ignore", invalid="ignore")  # as fit_bouc_wen's: overflowing candidates are dropped
     _WORKER["simulate"] = simulator
 
 
