@@ -209,3 +209,15 @@ def test_stage_false_only_locks(tmp_path):
         out.mkdir()
         (out / "policy.json").write_text("{}")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["train"]
+
+
+def test_bench_refuses_a_special_file_before_it_measures(capsys, monkeypatch):
+    from ssme_envs import bench
+    from ssme_envs.cli import main
+
+    monkeypatch.setattr(bench, "run_benchmark", lambda *a, **k: pytest.fail("measured before refusing"))
+    args = ["bench", "--rounds", "1", "--sizes", "1", "--env", "ssme_envs/NozzleTVC-v0", "--out", "/dev/null"]
+    assert main(args) == 2
+    assert capsys.readouterr().err.strip().splitlines()[-1] == (
+        "error: /dev/null exists and is not a regular file: refusing to replace it"
+    )

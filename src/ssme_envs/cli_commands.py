@@ -14,7 +14,7 @@ import time
 from ssme_envs.cli_checks import check_count, check_seed, check_vector_sizes, positive_integers
 from ssme_envs.cli_identify import names as _names
 from ssme_envs.cli_identify import noting_replacement
-from ssme_envs.outputs import write_text
+from ssme_envs.outputs import check_file_target, write_text
 
 
 class UsageError(Exception):
@@ -57,8 +57,8 @@ def bench_command(args: argparse.Namespace) -> int:
     if unknown:
         raise UsageError(f"unknown env {', '.join(unknown)}; choose from {', '.join(ENV_IDS)}")
     check_vector_sizes(sizes, env_ids)
-    if args.out is not None and (args.out.is_dir() or not args.out.parent.is_dir()):
-        raise ValueError(f"--out {args.out}: must be a file in an existing directory")
+    if args.out is not None:
+        check_file_target(args.out)  # before the rounds, not after them
     actions = args.actions.split(",")
     if not actions or any(kind not in ACTIONS for kind in actions):
         raise UsageError(f"--actions must be among {', '.join(ACTIONS)}, got {args.actions!r}")

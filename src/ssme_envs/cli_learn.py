@@ -4,11 +4,11 @@ shared study); their parsers and what they run."""
 from __future__ import annotations
 
 import argparse
-import tempfile
 from pathlib import Path
 from typing import Any
 
 from ssme_envs.cli_checks import check_training
+from ssme_envs.outputs import check_file_target
 
 
 def add_learning_commands(commands: Any) -> None:
@@ -103,26 +103,13 @@ def tune_command(args: argparse.Namespace) -> int:
     from ssme_envs import tuning
 
     if args.out is not None:
-        _check_out_file(args.out)  # before the trials: their hours are not lost to a late refusal
+        check_file_target(args.out)  # before the trials: their hours are not lost to a late refusal
     study = tuning.tune(args.env, args.algo, args.storage, args.study, args.trials, args.timesteps,
                         args.seed, args.num_envs, args.evaluations, args.eval_episodes)  # fmt: skip
     print(tuning.summary(study))
     if args.out is not None:
         print(f"wrote {tuning.write_best_config(study, args.out)}")
     return 0
-
-
-def _check_out_file(path: Path) -> None:
-    """ValueError unless ``path`` can be written as :func:`ssme_envs.outputs.write_text` writes it:
-    a file (not a directory) whose directory exists and takes a new file (tried, not guessed from
-    permission bits, which neither root nor a read-only mount honour)."""
-    if path.is_dir() or not path.parent.is_dir():
-        raise ValueError(f"--out {path}: must be a file in an existing directory")
-    try:
-        with tempfile.NamedTemporaryFile(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp"):
-            pass
-    except OSError as exc:
-        raise ValueError(f"--out {path}: cannot write in {path.parent} ({exc.strerror})") from None
 
 
 def _make_dir(path: Path) -> None:

@@ -24,6 +24,7 @@ import os
 import secrets
 import shutil
 import sys
+import tempfile
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -62,10 +63,7 @@ def atomic_write(path: str | Path, mode: str = "w") -> Iterator[IO[Any]]:
     """
     if mode not in ("w", "wb"):
         raise ValueError(f"mode must be 'w' or 'wb', got {mode!r}")
-    path = Path(os.path.realpath(path))  # through a symlink: its target is the file replaced
-    if path.exists() and not path.is_file() and not path.is_dir():  # a directory: the rename fails
-        # renaming over a device, FIFO or socket would replace it (as root, /dev/null too)
-        raise OutputError(f"{path} exists and is not a regular file: refusing to replace it")
+    path = _file_target(path)
     while True:
         tmp = path.with_name(f".{path.name}.{secrets.token_hex(4)}.tmp")
         try:  # mode 0o666: the process umask applies, as for an ordinary open()
@@ -87,6 +85,31 @@ def atomic_write(path: str | Path, mode: str = "w") -> Iterator[IO[Any]]:
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+
+
+def _file_target(path: str | Path) -> Path:
+    """The file :func:`atomic_write` replaces for ``path``: a symlink's target; OutputError for a
+    device, FIFO or socket (renaming over one would replace it: as root, /dev/null too). A
+    directory is left to the rename, which fails on it."""
+    target = Path(os.path.realpath(path))
+    if target.exists() and not target.is_file() and not target.is_dir():
+        raise OutputError(f"{target} exists and is not a regular file: refusing to replace it")
+    return target
+
+
+def check_file_target(path: str | Path, option: str = "--out") -> None:
+    """OutputError unless :func:`atomic_write` can write ``path``: a file (not a directory or a
+    special file) in an existing directory that takes a new file (tried, not guessed from
+    permission bits, which neither root nor a read-only mount honour). For a command to check
+    before its long work rather than fail at its end."""
+    target = _file_target(path)
+    if target.is_dir() or not target.parent.is_dir():
+        raise OutputError(f"{option} {path}: must be a file in an existing directory")
+    try:
+        with tempfile.NamedTemporaryFile(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp"):
+            pass
+    except OSError as exc:
+        raise OutputError(f"{option} {path}: cannot write in {target.parent} ({exc.strerror})") from None
 
 
 def write_text(path: str | Path, text: str) -> None:
@@ -316,6 +339,7 @@ __all__ = [
     "MARKER",
     "OutputError",
     "atomic_write",
+    "check_file_target",
     "check_target",
     "directory_lock",
     "holds_run",

@@ -25,7 +25,8 @@ MAX_DEAD_BAND = 0.4
 
 def resolve_truth(truth: TruthConfig | Mapping[str, Any] | None) -> TruthConfig:
     """A TruthConfig from one, from a dict of its fields, or the default; its effects' widths and
-    noise checked against the bounds above (ValueError naming the field)."""
+    noise checked against the bounds above (ValueError naming the field), the noise as one
+    standard deviation per output."""
     if truth is None:
         return TruthConfig()
     if isinstance(truth, TruthConfig):
@@ -42,9 +43,10 @@ def resolve_truth(truth: TruthConfig | Mapping[str, Any] | None) -> TruthConfig:
     for name in ("backlash", "stiction"):
         if name in fields:
             fields[name] = check_number(f"truth {name}", fields[name], 0.0, MAX_DEAD_BAND)
-    if "sensor_noise" in fields:
-        check_numbers("truth sensor_noise", fields["sensor_noise"], 2, 0.0, MAX_SENSOR_NOISE)
-    return truth if isinstance(truth, TruthConfig) else TruthConfig(**fields)
+    if "sensor_noise" in fields:  # one per output, as the engine tasks read it
+        noise = check_numbers("truth sensor_noise", fields["sensor_noise"], 2, 0.0, MAX_SENSOR_NOISE)
+        fields["sensor_noise"] = tuple(noise.tolist())
+    return TruthConfig(**fields)
 
 
 def resolve_plant(plant: str | Path | AlphaCanonicalModel, power: float) -> AlphaCanonicalModel:

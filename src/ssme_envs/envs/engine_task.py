@@ -9,7 +9,7 @@ from typing import Any, ClassVar, NamedTuple
 
 import numpy as np
 
-from ssme_envs.envs.engine_models import MAX_SENSOR_NOISE, design_model, resolve_plant, resolve_truth
+from ssme_envs.envs.engine_models import design_model, resolve_plant, resolve_truth
 from ssme_envs.envs.engine_nonlinear_plant import NonlinearPlantCore, nonlinear_engine_of, nonlinear_task
 from ssme_envs.envs.references import (
     Fault,
@@ -19,14 +19,13 @@ from ssme_envs.envs.references import (
     uniforms_needed,
 )
 from ssme_envs.envs.task import (
+    MAX_EPISODE_SECONDS,
     Carrier,
     Observation,
     Schedule,
     Value,
     check_number,
     check_numbers,
-    real_number,
-    shown,
 )
 from ssme_envs.models.engine import TruthConfig, check_stable_plant, output_coupling
 from ssme_envs.models.engine_nonlinear import NonlinearEngine
@@ -37,7 +36,7 @@ from ssme_envs.models.engine_step import (
     step_arrays,
     valves_pair_floats,
 )
-from ssme_envs.models.linked import POWER_RANGE, LinkedEngineModel
+from ssme_envs.models.linked import LinkedEngineModel
 from ssme_envs.models.statespace import AlphaCanonicalModel
 
 ENGINE_OBSERVATION = Observation(
@@ -51,7 +50,7 @@ ENGINE_OBSERVATION = Observation(
 # (at least 2 steps each up to 0.5 s; round(1 / dt) is 0 from 2 s), and an episode's draws and
 # tables grow with its steps (1e-9 s asked 74 GiB at reset); the packaged models have 0.04 s
 MIN_DT, MAX_DT = 1e-3, 0.5
-MAX_EPISODE_STEPS = 1_000_000  # 3600 s episodes down to dt = 3.6 ms
+MAX_EPISODE_STEPS = 1_000_000  # the longest episodes (MAX_EPISODE_SECONDS) down to dt = 3.6 ms
 
 
 class EnginePlant(NamedTuple):
@@ -126,10 +125,7 @@ class EngineTask:
         episode_seconds: float = 10.0,
         action_scale: float = 0.02,
     ) -> EngineTask:
-        number, (low, high) = real_number(power), POWER_RANGE  # a huge int is inf (float() overflows)
-        if number is None or not np.isfinite(number):
-            raise ValueError(f"power must be a number of % within {low:g}-{high:g}, got {shown(power)}")
-        power = LinkedEngineModel.check_power(number)
+        power = LinkedEngineModel.check_power(power)
         engine = nonlinear_engine_of(plant)
         if engine is not None:  # the point model's task with the nonlinear engine as its plant
             linear = cls.build(power=power, truth=truth, reference=reference, fault=fault,
@@ -152,9 +148,9 @@ class EngineTask:
         config = resolve_truth(truth)
         check_reference(reference)
         amplitude = check_numbers("reference_amplitude", reference_amplitude, 2, 0.0, 0.05)
-        episode_seconds = check_number("episode_seconds", episode_seconds, 1.0, 3600.0)
+        episode_seconds = check_number("episode_seconds", episode_seconds, 1.0, MAX_EPISODE_SECONDS)
         action_scale = check_number("action_scale", action_scale, 0.0, 0.2, low_open=True)
-        noise = check_numbers("truth sensor_noise", config.sensor_noise, 2, 0.0, MAX_SENSOR_NOISE)
+        noise = np.array(config.sensor_noise, dtype=float)  # two, checked by resolve_truth
         # dt out of range first: round() of an episode over a tiny dt would overflow
         if not MIN_DT <= model.dt <= MAX_DT or round(episode_seconds / model.dt) > MAX_EPISODE_STEPS:
             raise ValueError(

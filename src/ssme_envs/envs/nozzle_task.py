@@ -13,7 +13,7 @@ import numpy as np
 
 from ssme_envs.envs.plant_spread import PlantSpread, covered_joints, resolve_spread
 from ssme_envs.envs.references import Fault, check_reference, normal_rows, reference_signals, uniforms_needed
-from ssme_envs.envs.task import SYNCED, Carrier, Observation, Value, check_number
+from ssme_envs.envs.task import MAX_EPISODE_SECONDS, SYNCED, Carrier, Observation, Value, check_number
 from ssme_envs.models.nozzle import (
     DEFAULT_TORQUE_LIMIT,
     MAX_SUBSTEPS,
@@ -134,7 +134,7 @@ def episode_options(
     if parsed is not None and parsed.kind not in NOZZLE_FAULTS:
         raise ValueError(f"unknown fault kind {parsed.kind!r}; choose one of {NOZZLE_FAULTS}")
     return {
-        "horizon": round(check_number("episode_seconds", seconds, 0.1, 3600.0) / dt),
+        "horizon": round(check_number("episode_seconds", seconds, 0.1, MAX_EPISODE_SECONDS) / dt),
         "reference": reference,
         "amplitude": np.array([math.radians(amplitude)]),
         "noise_std": check_number("sensor_noise", sensor_noise, 0.0, 0.01),

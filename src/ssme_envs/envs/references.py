@@ -15,15 +15,15 @@ from typing import Any
 
 import numpy as np
 
-from ssme_envs.envs.task import real_number, shown
+from ssme_envs.envs.task import MAX_EPISODE_SECONDS, real_number, shown
 
 REFERENCE_KINDS = ("random_steps", "step", "ramp", "prbs", "sine_sweep", "attitude", "zero", "mixed")
 # what a "mixed" episode draws from, with equal probability
 MIXED_KINDS = ("random_steps", "step", "ramp", "sine_sweep", "attitude")
 FAULT_KINDS = ("stuck_valve", "sensor_bias", "gain_loss")
-# s: no env's episode is longer (3600 s at most); refused here, a later (or infinite) time would
-# overflow the rounding to a step before the env's own "beyond the episode" check
-MAX_FAULT_TIME = 3600.0
+# s: no env's episode is longer; refused here, a later (or infinite) time would overflow the
+# rounding to a step before the env's own "beyond the episode" check
+MAX_FAULT_TIME = MAX_EPISODE_SECONDS
 
 
 def check_reference(kind: str) -> str:

@@ -191,6 +191,9 @@ def transpose_into(table: np.ndarray, out: np.ndarray, tile: int = 256) -> np.nd
     return out
 
 
+MAX_EPISODE_SECONDS = 3600.0  # the longest episode any env takes (and so the latest fault time)
+
+
 def real_number(value: Any) -> float | None:
     """``value`` as a float if it is a real number (a Python or numpy int or float, not a bool),
     else None; an int too large for a float is +-inf, so that the callers' finite checks refuse it
@@ -240,6 +243,7 @@ __all__ = [
     "FIRST_STEPS",
     "FLOATS",
     "GATHER",
+    "MAX_EPISODE_SECONDS",
     "SYNCED",
     "Carrier",
     "Observation",

@@ -21,6 +21,8 @@ SSME covering its full range of operation"; NASA TM-104421 linked 25 point model
 
 from __future__ import annotations
 
+import math
+import reprlib
 from functools import cached_property
 
 import numpy as np
@@ -66,13 +68,19 @@ class LinkedEngineModel:
 
     @staticmethod
     def check_power(power: float) -> float:
-        """The power level as a float, or a ValueError if it is outside 65-109 %."""
+        """The power level as a float, or a ValueError unless a real number (not a bool or a
+        string) within 65-109 %."""
+        shown = reprlib.repr(power)  # an int of 400 digits is cut
+        if isinstance(power, bool | np.bool_) or not isinstance(
+            power, int | float | np.integer | np.floating
+        ):
+            raise ValueError(f"power must be a number of %, got {shown}")
         try:
             value = float(power)
-        except (TypeError, ValueError):
-            raise ValueError(f"power must be a number of %, got {power!r}") from None
+        except OverflowError:  # an int too large for a float: out of range
+            value = math.inf
         if not POWER_RANGE[0] <= value <= POWER_RANGE[1]:
-            raise ValueError(f"power must be within {POWER_RANGE[0]:g}-{POWER_RANGE[1]:g} %, got {power!r}")
+            raise ValueError(f"power must be within {POWER_RANGE[0]:g}-{POWER_RANGE[1]:g} %, got {shown}")
         return value
 
     def local_model(self, power: float) -> AlphaCanonicalModel:
