@@ -260,6 +260,9 @@ def test_the_scalar_env_refuses_actions_that_are_not_real_numbers(action):
             {0: [0.1, 0.2]},
             np.full((2, 2), "0.5"),
             [[None, 0.0], [0.0, 0.0]],
+            [[True, 0.5], [0.0, 0.0]],
+            [(0.1, 0.2), [np.bool_(False), 0.0]],
+            [np.array([0.1, 0.2]), np.array([True, False])],
         ]
     )
 )

@@ -120,6 +120,16 @@ def action_floats(action: Any, n: int, meaning: str) -> list[float]:
     return floats
 
 
+def _holds_bool(values: Iterable[Any]) -> bool:
+    """Whether nested lists or tuples hold a bool (Python's or numpy's, or a bool array)."""
+    for value in values:
+        if isinstance(value, bool | np.bool_) or (isinstance(value, np.ndarray) and value.dtype.kind == "b"):
+            return True
+        if isinstance(value, list | tuple) and _holds_bool(value):
+            return True
+    return False
+
+
 def batch_actions(actions: Any) -> np.ndarray:
     """A vector env's actions, other than a float32 or float64 array (the step's fast path), as
     float64: a real (float or integer) array, or nested lists of real numbers.
@@ -127,8 +137,8 @@ def batch_actions(actions: Any) -> np.ndarray:
     Raises
     ------
     ActionTypeError
-        Not real numbers: complex, bool, strings or other objects (numpy would drop an imaginary
-        part, or read "0.5" as 0.5).
+        Not real numbers: complex, bool (alone or among numbers), strings or other objects (numpy
+        would drop an imaginary part, read "0.5" as 0.5, or True as 1).
     ValueError
         A ragged nesting, or an integer too large for a float.
     """
@@ -138,15 +148,17 @@ def batch_actions(actions: Any) -> np.ndarray:
         raise ValueError(
             f"actions must be a rectangular array (num_envs, actions), got {shown(actions)}"
         ) from None
+    what = f"{type(actions).__name__} of dtype {array.dtype}"
     if array.dtype.kind == "O":  # Python ints beyond int64 (or anything else): each checked
         floats = _floats(array.flat, actions, "actions")
         if floats is not None:
             return np.array(floats, dtype=np.float64).reshape(array.shape)
     elif array.dtype.kind in REAL_KINDS:
-        return array.astype(np.float64)
+        if array is actions or not _holds_bool(actions):  # numpy reads a mixed list's bools as 0, 1
+            return array.astype(np.float64)
+        what = f"a {type(actions).__name__} holding bools"
     raise ActionTypeError(
-        f"actions must be real numbers, a float array of shape (num_envs, actions), got "
-        f"{type(actions).__name__} of dtype {array.dtype}"
+        f"actions must be real numbers, a float array of shape (num_envs, actions), got {what}"
     )
 
 

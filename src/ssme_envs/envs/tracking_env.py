@@ -110,6 +110,9 @@ class TrackingEnv(gym.Env):
         self._ended = ""
         task = self.task
         self._uniforms = self.np_random.random(task.draw_size, dtype=np.float32)[:, None]
+        # the whole episode in one call: on one env its cost hardly grows with the steps (a block
+        # costs about as much as the episode); converted to floats block by block as it goes
+        self._episode = task.episodes(self._uniforms, 0, task.horizon + 1)
         # per step, per channel, as floats (the float carrier's operands), the steps the episode
         # has reached so far
         self._refs: list[list[float]] = []
@@ -167,10 +170,11 @@ class TrackingEnv(gym.Env):
         return action_floats(action, self.task.n_actions, meaning)
 
     def _extend(self) -> tuple[np.ndarray, np.ndarray]:
-        """Compute the episode's next block of steps (``next_stop``) as the vector env does;
-        its references and noise (channels, steps, 1)."""
+        """Convert the episode's next block of steps (``next_stop``) to floats; its references
+        and noise (channels, steps, 1)."""
         start = len(self._noise)
-        refs, noise = self.task.episodes(self._uniforms, start, next_stop(start, self.task.horizon + 1))
+        stop = next_stop(start, self.task.horizon + 1)
+        refs, noise = (values[:, start:stop] for values in self._episode)
         self._refs += refs[:, :, 0].T.tolist()
         self._noise += noise[:, :, 0].T.astype(np.float64).tolist()
         return refs, noise
