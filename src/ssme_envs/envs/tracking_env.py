@@ -110,9 +110,6 @@ class TrackingEnv(gym.Env):
         self._ended = ""
         task = self.task
         self._uniforms = self.np_random.random(task.draw_size, dtype=np.float32)[:, None]
-        # the whole episode in one call: on one env its cost hardly grows with the steps (a block
-        # costs about as much as the episode); converted to floats block by block as it goes
-        self._episode = task.episodes(self._uniforms, 0, task.horizon + 1)
         # per step, per channel, as floats (the float carrier's operands), the steps the episode
         # has reached so far
         self._refs: list[list[float]] = []
@@ -170,11 +167,19 @@ class TrackingEnv(gym.Env):
         return action_floats(action, self.task.n_actions, meaning)
 
     def _extend(self) -> tuple[np.ndarray, np.ndarray]:
-        """Convert the episode's next block of steps (``next_stop``) to floats; its references
-        and noise (channels, steps, 1)."""
-        start = len(self._noise)
-        stop = next_stop(start, self.task.horizon + 1)
-        refs, noise = (values[:, start:stop] for values in self._episode)
+        """Convert the episode's next block of steps (``next_stop``, as the vector env's) to
+        floats; its references and noise (channels, steps, 1). The first block is computed at
+        reset, all the rest at once when the episode leaves it: on one env a block costs about
+        as much as the whole episode."""
+        start, length = len(self._noise), self.task.horizon + 1
+        stop = next_stop(start, length)
+        if start == 0:
+            refs, noise = self.task.episodes(self._uniforms, 0, stop)
+        else:
+            if start == next_stop(0, length):  # leaving the first block: the rest, from here
+                self._rest = self.task.episodes(self._uniforms, start, length)
+            offset = length - self._rest[1].shape[1]  # the step the rest begins at
+            refs, noise = (values[:, start - offset : stop - offset] for values in self._rest)
         self._refs += refs[:, :, 0].T.tolist()
         self._noise += noise[:, :, 0].T.astype(np.float64).tolist()
         return refs, noise
