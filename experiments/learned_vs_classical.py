@@ -131,7 +131,12 @@ def main() -> None:
     lines += ["## Training of the shipped policies (this machine's 2 CPU cores)", "", *training_rows(), ""]
     tried = [(e, a, r) for e in evaluations for a, r in tried_runs(e).items()]
     if tried:
-        lines += ["Tried, not shipped (configs in experiments/configs/, runs in experiments/runs/):", ""]
+        lines += [
+            "Tried, not shipped (configs in experiments/configs/; the runs, in experiments/runs/, are not "
+            "in the repository: `ssme-envs train --config experiments/configs/NAME.toml --out "
+            "experiments/runs/NAME` remakes one):",
+            "",
+        ]
         for env_id, algo, run in tried:
             summary = json.loads((run / "training.json").read_text())
             lines.append(

@@ -537,3 +537,15 @@ def test_ctrl_c_inside_an_import_exits_130_not_a_traceback(monkeypatch, capsys):
     monkeypatch.setattr(cli, "_dispatch", interrupted_import)
     assert cli.main(["report", "--out", "x"]) == 130
     assert capsys.readouterr().err == "error: interrupted (Ctrl-C)\n"
+
+
+@pytest.mark.parametrize(("plant", "module"), [("engine", "pipeline"), ("nozzle", "nozzle_bench")])
+def test_identify_help_states_the_default_seed(plant, module, capsys):
+    """The help's default seed (written out: reading it would import the identification at
+    every start of the CLI) is the embedded experiment's."""
+    import importlib
+
+    with pytest.raises(SystemExit):
+        main(["identify", plant, "--help"])
+    seed = importlib.import_module(f"ssme_envs.identification.{module}").DEFAULT_SEED
+    assert f"(default: {seed})" in " ".join(capsys.readouterr().out.split())

@@ -19,6 +19,7 @@ from ssme_envs.identification.nozzle_pipeline import (
     bench_experiment,
     bench_motion,
     identify_nozzle,
+    run_default,
     strong_hysteresis_nozzle,
     validate_nozzle,
     validation_experiment,
@@ -28,6 +29,7 @@ from ssme_envs.identification.nozzle_report import write_nozzle_report
 from ssme_envs.identification.nozzle_uncertainty import dsr_e_uncertainty, regression_covariance
 from ssme_envs.identification.subspace import dsr_e, second_order_parameters
 from ssme_envs.models.nozzle import (
+    IDENTIFIED_FILES,
     NozzleModel,
     NozzleParameters,
     identified_nozzle,
@@ -461,3 +463,35 @@ def test_the_acquisition_bias_correction_recovers_the_joint(which):
     bias = acquisition_bias(tau, tuple(est))
     corrected = est - np.array([bias["J"], bias["b"], bias["k"]])
     np.testing.assert_allclose(corrected, want, rtol=2e-6)
+
+
+def _assert_same_json(made, packaged, where="model"):
+    """Equal JSON documents, numbers to 1e-6 relative (the fit's last bits may differ between
+    CPUs, as in the pin of the default bench's model above)."""
+    if isinstance(packaged, dict):
+        assert set(made) == set(packaged), where
+        for key, value in packaged.items():
+            _assert_same_json(made[key], value, f"{where}.{key}")
+    elif isinstance(packaged, list):
+        assert len(made) == len(packaged), where
+        for i, (a, b) in enumerate(zip(made, packaged, strict=True)):
+            _assert_same_json(a, b, f"{where}[{i}]")
+    elif isinstance(packaged, float) and not isinstance(made, bool):
+        assert made == pytest.approx(packaged, rel=1e-6, abs=1e-300), where
+    else:
+        assert made == packaged, where
+
+
+@pytest.mark.slow
+def test_the_strong_nozzle_design_model_is_what_its_pipeline_produces(tmp_path):
+    """experiments/make_design_models.py's run for the strong nozzle (the default bench test of
+    the "strong" truth) reproduces the packaged nozzle_strong_identified.json."""
+    from importlib import resources
+
+    model = run_default(truth="strong")[0].model
+    model.save(tmp_path / "model.json")
+    made = json.loads((tmp_path / "model.json").read_text())
+    packaged = json.loads(
+        (resources.files("ssme_envs") / "models" / "data" / IDENTIFIED_FILES["strong"]).read_text()
+    )
+    _assert_same_json(made, packaged)

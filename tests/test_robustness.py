@@ -56,6 +56,32 @@ def test_monte_carlo_writes_the_table_from_the_drawn_plants(tmp_path):
     assert text.startswith(f"# Robustness on {NOZZLE}") and "3 plants drawn with relative spread 0.3" in text
 
 
+def test_plant_option_reaches_both_runs_and_uncertainty_draws_from_the_identified_model(tmp_path):
+    """``--plant identified --plant-spread uncertainty``: the drawn run is evaluate() with those env
+    options, the nominal run evaluate() on the identified plant alone (not the scenario's own)."""
+    from agents import parse_controller
+    from ssme_envs.evaluation import evaluate
+
+    out = tmp_path / "mc"
+    args = ["evaluate", "--env", NOZZLE, "--controllers", "lqi", "--scenario", "step", "--monte-carlo", "3",
+            "--plant", "identified", "--plant-spread", "uncertainty", "--out", str(out)]  # fmt: skip
+    assert main(args) == 0
+    robust = json.loads((out / "robustness.json").read_text())
+    assert robust["plant_spread"] == "uncertainty"
+    factories = {"lqi": parse_controller("lqi", NOZZLE)}
+    drawn = evaluate(
+        NOZZLE, factories, ["step"], 3, 0, options={"plant": "identified", "plant_spread": "uncertainty"}
+    )
+    nominal = evaluate(NOZZLE, factories, ["step"], 3, 0, options={"plant": "identified"})
+    default = evaluate(NOZZLE, factories, ["step"], 3, 0)
+    assert robust["scenarios"]["step"]["lqi"]["mean"] == drawn["step"]["lqi"].cost_mean
+    text = (out / "robustness.md").read_text()
+    row = next(line for line in text.splitlines() if line.startswith("| lqi"))
+    assert float(row.split("|")[2]) == pytest.approx(nominal["step"]["lqi"].cost_mean, abs=6e-4)
+    assert drawn["step"]["lqi"].cost_mean != nominal["step"]["lqi"].cost_mean  # plants were drawn
+    assert nominal["step"]["lqi"].cost_mean != default["step"]["lqi"].cost_mean  # the plant replaced
+
+
 @pytest.mark.parametrize(
     ("extra", "message"),
     [
@@ -64,6 +90,11 @@ def test_monte_carlo_writes_the_table_from_the_drawn_plants(tmp_path):
         (["--env", NOZZLE, "--plant-spread", "0.1"], "--plant-spread applies with --monte-carlo"),
         (["--env", NOZZLE, "--monte-carlo", "0"], "--monte-carlo must be a positive integer"),
         (["--env", NOZZLE, "--monte-carlo", "2", "--plant-spread", "0.9"], "plant_spread must be in"),
+        (["--env", NOZZLE, "--plant", "nope"], "scenario 'step': plant must be one of"),
+        (
+            ["--env", "ssme_envs/EngineTracking-v0", "--plant", "identified"],
+            "scenario 'bucket': plant='identified'",
+        ),
     ],
 )
 def test_monte_carlo_errors_are_one_line(tmp_path, capsys, extra, message):

@@ -110,7 +110,9 @@ def build_parser() -> argparse.ArgumentParser:
         "--method", choices=("iv", "ls"), default="iv", help="parameter estimator (default: %(default)s)"
     )
     engine.add_argument("--symmetric", action="store_true", help="do not estimate the lambda gains")
-    engine.add_argument("--seed", type=int, default=None, help="seed of the embedded experiment")
+    engine.add_argument(
+        "--seed", type=int, default=None, help="seed of the embedded experiment (default: 2024)"
+    )
 
     nozzle = plants.add_parser(
         "nozzle",
@@ -128,7 +130,9 @@ def build_parser() -> argparse.ArgumentParser:
     nozzle.add_argument("--dt", type=float, help="sample time in s, if the CSV has no 't' column")
     nozzle.add_argument("--validate", type=Path, help="a second CSV record to validate on")
     nozzle.add_argument("--workers", type=int, default=2, help="processes for the fit (default: %(default)s)")
-    nozzle.add_argument("--seed", type=int, default=None, help="seed of the bench test and of the search")
+    nozzle.add_argument(
+        "--seed", type=int, default=None, help="seed of the bench test and of the search (default: 7)"
+    )
     nozzle.add_argument(
         "--normalization-a",
         type=float,
@@ -196,7 +200,13 @@ def build_parser() -> argparse.ArgumentParser:
         "--plant-spread",
         default=None,
         help="with --monte-carlo: a relative spread of the joint's parameters (log-normal, e.g. 0.2, "
-        "the default) or 'uncertainty' (the covariance of the model.json the env's plant comes from)",
+        "the default) or 'uncertainty' (the covariance of the model.json the env's plant comes from: "
+        "with --plant identified, strong_identified or a model.json)",
+    )
+    evaluate.add_argument(
+        "--plant",
+        help="the plant of every scenario, in place of the scenario's own: one of the env's plant "
+        "names (e.g. identified) or a model.json (default: each scenario's)",
     )
     evaluate.add_argument(
         "--seed", type=int, default=0, help="seed of the first episode (default: %(default)s)"

@@ -92,7 +92,8 @@ def evaluate_command(args: argparse.Namespace) -> int:
     with noting_replacement(args.out):
         evaluate_to(
             args.out, env_id, controllers, scenarios, episodes, args.seed,
-            allow_pickle=args.allow_pickle, command=command, progress=_to_stderr, **robust,
+            allow_pickle=args.allow_pickle, command=command, progress=_to_stderr, plant=args.plant,
+            **robust,
         )  # fmt: skip
     extra = f", {args.out / 'robustness.md'}" if robust else ""
     print(f"wrote {args.out / 'results.md'}, {args.out / 'results.json'}{extra} and the plots")

@@ -17,7 +17,7 @@ import gymnasium as gym
 import numpy as np
 
 from ssme_envs.evaluation_result import ActuatorMetrics, ControllerMetrics, EvaluationResult, OutputMetrics
-from ssme_envs.metrics import limit_cycle, saturation_fraction
+from ssme_envs.metrics import limit_cycle, saturation_fraction, step_metrics, step_response
 from ssme_envs.robustness import cvar
 
 NOISE_OFF = {"backlash": 5e-4, "stiction": 2e-4, "sensor_noise": 0.0}
@@ -210,24 +210,6 @@ def rollout(env: gym.vector.VectorEnv, controller: Any, name: str, seed: int = 0
     )
 
 
-def step_metrics(t: np.ndarray, y: np.ndarray, final: float | None = None, threshold: float = 0.02) -> dict:
-    """Rise time (10-90 %), settling time (within ``threshold`` of the final value for good),
-    overshoot (% of the final value) of a step response y(t) starting from 0; the final value
-    is y's last unless given. The definitions of python-control's ``step_info``."""
-    final = float(y[-1]) if final is None else float(final)
-    if final == 0 or not np.isfinite(final):
-        return {"rise_time": np.nan, "settling_time": np.nan, "overshoot": np.nan}
-    sign = np.sign(final)
-    lower = np.flatnonzero(sign * (y - 0.1 * final) >= 0)
-    upper = np.flatnonzero(sign * (y - 0.9 * final) >= 0)
-    rise = t[upper[0]] - t[lower[0]] if upper.size and lower.size else np.nan
-    outside = np.flatnonzero(np.abs(y / final - 1.0) >= threshold)
-    settled = 0 if outside.size == 0 else outside[-1] + 1
-    settling = t[settled] if settled < len(t) else np.nan
-    overshoot = max(0.0, 100.0 * (np.max(sign * y) - abs(final)) / abs(final))
-    return {"rise_time": float(rise), "settling_time": float(settling), "overshoot": float(overshoot)}
-
-
 def metrics(run: Rollout, layout: Layout) -> ControllerMetrics:
     """Per-output tracking, step and limit-cycle metrics (over episodes), actuator wear and time
     at the limits (of the applied actions), and the episode cost (minus the return): mean, std,
@@ -250,7 +232,7 @@ def metrics(run: Rollout, layout: Layout) -> ControllerMetrics:
             ise=float(((e**2).sum(axis=0) * run.dt).mean()),
             itae=float(((t[:, None] * e).sum(axis=0) * run.dt).mean()),
             steady_state_error=float(e[-tail:].mean()),
-            **_step_response(t, y, r, alive),
+            **step_response(t, y, r, alive),
             **_limit_cycles(step_rows[:, :, layout.error_columns[i]], references, alive, run.dt),
         )
     change = np.diff(run.actions, axis=0, prepend=0.0)
@@ -294,29 +276,6 @@ def _limit_cycles(err: np.ndarray, refs: np.ndarray, alive: np.ndarray, dt: floa
         "limit_cycle_amplitude": float(np.median([c.amplitude for c in cycles])) if cycles else nan,
         "limit_cycle_longest_period": float(np.median([r.longest_period for r in tested])) if tested else nan,
     }
-
-
-def _step_response(t: np.ndarray, y: np.ndarray, r: np.ndarray, alive: np.ndarray) -> dict[str, float]:
-    """Step metrics averaged over the episodes whose reference is one step (NaN otherwise)."""
-    found = []
-    for i in range(y.shape[1]):
-        jumps = np.flatnonzero(np.diff(r[:, i]) != 0)
-        if len(jumps) != 1 or not alive[:, i].all():
-            continue
-        at = jumps[0]  # the reference changes between obs rows at and at + 1 (step at)
-        size = r[at + 1, i] - r[at, i]
-        base = y[at - 1, i] if at > 0 else 0.0
-        response = y[at:, i] - base
-        if len(response) < 10:
-            continue
-        found.append(step_metrics(t[at:] - t[at], response / size, final=1.0))
-    if not found:
-        return {"rise_time": np.nan, "settling_time": np.nan, "overshoot": np.nan}
-    summary = {}
-    for key in found[0]:
-        values = np.array([f[key] for f in found])
-        summary[key] = float(np.nanmean(values)) if np.isfinite(values).any() else np.nan
-    return summary
 
 
 def check_factories(controllers: Any) -> None:
@@ -371,6 +330,11 @@ def evaluate(
         raise ValueError(f"episodes must be a positive integer, got {episodes!r}")
     check_factories(controllers)
     names = scenario_names(env_id) if scenarios is None else check_scenarios(env_id, scenarios)
+    for scenario in names:  # every scenario takes the options, before any work (a few ms each)
+        try:
+            make_env(env_id, scenario, 1, options).close()
+        except ValueError as exc:
+            raise ValueError(f"scenario {scenario!r}: {exc}") from None
     say = progress or (lambda _: None)
     layout = layout_of(env_id)
     result = EvaluationResult(env_id)

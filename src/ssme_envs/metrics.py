@@ -1,4 +1,5 @@
-"""Actuator saturation and limit-cycle detection on rollouts: pure functions of arrays.
+"""Actuator saturation, limit-cycle detection and step-response metrics on rollouts: pure
+functions of arrays.
 
 Saturation is read from the actions the env applied (after its clip to [-1, 1]), never from what
 a controller requested: a controller that clips its own output requests no more than full scale,
@@ -248,4 +249,53 @@ def _periodic(
     return (k + shift) * dt, math.sqrt(2.0 * acov[k]), float(rho[k])
 
 
-__all__ = ["AT_LIMIT_TOL", "NO_CYCLE", "LimitCycle", "limit_cycle", "saturation_fraction"]
+def step_metrics(t: np.ndarray, y: np.ndarray, final: float | None = None, threshold: float = 0.02) -> dict:
+    """Rise time (10-90 %), settling time (within ``threshold`` of the final value for good),
+    overshoot (% of the final value) of a step response y(t) starting from 0; the final value
+    is y's last unless given. The definitions of python-control's ``step_info``."""
+    final = float(y[-1]) if final is None else float(final)
+    if final == 0 or not np.isfinite(final):
+        return {"rise_time": np.nan, "settling_time": np.nan, "overshoot": np.nan}
+    sign = np.sign(final)
+    lower = np.flatnonzero(sign * (y - 0.1 * final) >= 0)
+    upper = np.flatnonzero(sign * (y - 0.9 * final) >= 0)
+    rise = t[upper[0]] - t[lower[0]] if upper.size and lower.size else np.nan
+    outside = np.flatnonzero(np.abs(y / final - 1.0) >= threshold)
+    settled = 0 if outside.size == 0 else outside[-1] + 1
+    settling = t[settled] if settled < len(t) else np.nan
+    overshoot = max(0.0, 100.0 * (np.max(sign * y) - abs(final)) / abs(final))
+    return {"rise_time": float(rise), "settling_time": float(settling), "overshoot": float(overshoot)}
+
+
+def step_response(t: np.ndarray, y: np.ndarray, r: np.ndarray, alive: np.ndarray) -> dict[str, float]:
+    """Step metrics averaged over the episodes whose reference is one step (NaN otherwise)."""
+    found = []
+    for i in range(y.shape[1]):
+        jumps = np.flatnonzero(np.diff(r[:, i]) != 0)
+        if len(jumps) != 1 or not alive[:, i].all():
+            continue
+        at = jumps[0]  # the reference changes between obs rows at and at + 1 (step at)
+        size = r[at + 1, i] - r[at, i]
+        base = y[at - 1, i] if at > 0 else 0.0
+        response = y[at:, i] - base
+        if len(response) < 10:
+            continue
+        found.append(step_metrics(t[at:] - t[at], response / size, final=1.0))
+    if not found:
+        return {"rise_time": np.nan, "settling_time": np.nan, "overshoot": np.nan}
+    summary = {}
+    for key in found[0]:
+        values = np.array([f[key] for f in found])
+        summary[key] = float(np.nanmean(values)) if np.isfinite(values).any() else np.nan
+    return summary
+
+
+__all__ = [
+    "AT_LIMIT_TOL",
+    "NO_CYCLE",
+    "LimitCycle",
+    "limit_cycle",
+    "saturation_fraction",
+    "step_metrics",
+    "step_response",
+]

@@ -13,6 +13,7 @@ import importlib.util
 import time
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 from ssme_envs.cli_checks import check_episodes
 from ssme_envs.evaluation_result import EvaluationResult
@@ -58,31 +59,35 @@ def _evaluate_into(
     command: str,
     progress: Progress,
     spread: float | str | None = None,
+    plant: str | None = None,
 ) -> EvaluationResult:
     """Evaluate and write results.json, results.md and the plots into ``work``; with a
     ``spread`` (Monte Carlo), every episode on a plant of its own, and robustness.md and
-    robustness.json beside (:func:`_robustness_into`)."""
+    robustness.json beside (:func:`_robustness_into`); ``plant``: every scenario's plant."""
     from ssme_envs.evaluation import evaluate
     from ssme_envs.results import write_evaluation
 
-    options = None if spread is None else spread_options(env_id, spread)
+    nominal = {} if plant is None else {"plant": plant}
+    options = {**nominal, **({} if spread is None else spread_options(env_id, spread))} or None
     result = evaluate(env_id, factories, scenarios, episodes, seed, progress=progress, options=options)
     write_evaluation(result, work, command)
     if spread is not None:
-        _robustness_into(work, result, factories, episodes, seed, spread, command, progress)
+        _robustness_into(work, result, factories, episodes, seed, spread, command, progress, nominal or None)
     return result
 
 
 def _robustness_into(
     work: Path, drawn: EvaluationResult, factories: Mapping[str, Callable], episodes: int, seed: int,
-    spread: float | str, command: str, progress: Progress,
+    spread: float | str, command: str, progress: Progress, options: Mapping[str, Any] | None = None,
 ) -> None:  # fmt: skip
     """robustness.md and .json in ``work`` for the drawn-plant evaluation ``drawn``, the nominal
-    plant's mean cost from a second run on the same seeds."""
+    plant's mean cost from a second run on the same seeds (with the env ``options``)."""
     from ssme_envs.evaluation import evaluate
 
     progress("the same episodes on the nominal plant ...")
-    nominal = evaluate(drawn.env_id, factories, list(drawn), episodes, seed, progress=progress)
+    nominal = evaluate(
+        drawn.env_id, factories, list(drawn), episodes, seed, progress=progress, options=options
+    )
     write_robustness(work, drawn, nominal, spread, command)
 
 
@@ -99,6 +104,7 @@ def evaluate_to(
     progress: Progress = _silent,
     monte_carlo: int | None = None,
     plant_spread: float | str = DEFAULT_SPREAD,
+    plant: str | None = None,
 ) -> EvaluationResult:
     """Evaluate controllers on an env's scenarios; write results.json, results.md and plots.
 
@@ -118,6 +124,9 @@ def evaluate_to(
         relative spread, or ``"uncertainty"``: the model.json's covariance), one per episode
         (``episodes`` is then this number), and write robustness.md: mean, worst case and CVaR
         per controller, the nominal plant's mean beside (:mod:`ssme_envs.robustness`).
+    plant : str, optional
+        The env's ``plant`` option for every scenario, in place of the scenario's own (a plant
+        name such as ``"identified"``, or a model.json path).
 
     Returns
     -------
@@ -138,11 +147,13 @@ def evaluate_to(
             f"--episodes {episodes}"
             if spread is None
             else f"--monte-carlo {episodes} --plant-spread {spread}"
-        )
+        ) + ("" if plant is None else f" --plant {plant}")
         command = (f"ssme-envs evaluate --env {env_id} --controllers {','.join(factories)} --scenario "
                    f"{','.join(names)} {runs} --seed {seed} --out {out_dir}")  # fmt: skip
     with output_directory(out_dir) as work:
-        return _evaluate_into(work, env_id, factories, scenarios, episodes, seed, command, progress, spread)
+        return _evaluate_into(
+            work, env_id, factories, scenarios, episodes, seed, command, progress, spread, plant
+        )
 
 
 def report_plan(learned: bool | None = None) -> dict[str, tuple[list[str], list[str]]]:

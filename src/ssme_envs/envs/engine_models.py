@@ -11,7 +11,7 @@ from typing import Any
 
 from ssme_envs.envs.task import check_number, check_numbers
 from ssme_envs.models.engine import POWER_LEVELS, TruthConfig, identified_model, published_model
-from ssme_envs.models.linked import LinkedEngineModel
+from ssme_envs.models.linked import POWER_RANGE, LinkedEngineModel
 from ssme_envs.models.statespace import AlphaCanonicalModel
 
 # normalized output units: the largest reference step and sensor bias the engine envs take are
@@ -68,7 +68,8 @@ def resolve_plant(plant: str | Path | AlphaCanonicalModel, power: float) -> Alph
         return LinkedEngineModel().local_model(power)
     if plant == "identified":
         if power not in POWER_LEVELS:
-            raise ValueError(f"plant='identified' exists at power {list(POWER_LEVELS)} %, got {power!r}")
+            levels = [level for level in POWER_LEVELS if level <= POWER_RANGE[1]]  # 110 is off range
+            raise ValueError(f"plant='identified' exists at power {levels} %, got {power!r}")
         return identified_model(int(power))
     if isinstance(plant, str | Path) and str(plant).endswith(".json"):
         return AlphaCanonicalModel.load(plant)

@@ -332,14 +332,16 @@ class LauncherPitchEnv(TrackingEnv):
 
     ## Episode End
     Termination on leaving the envelope; truncation after ``episode_seconds`` (10 s, 500 steps
-    of 0.02 s). ``step`` after either raises
+    of 0.02 s). ``gymnasium.make`` also applies the registered limit of 500 steps: for longer
+    episodes pass ``max_episode_steps`` too. ``step`` after either raises
     :class:`~ssme_envs.envs.tracking_env.EpisodeOverError` and ``reset`` takes no options, as in
     ``NozzleTVC-v0``. A step whose state overflows or turns NaN ends the episode with
     ``info == {"nonfinite": True}``, a finite reward and observation, as in ``NozzleTVC-v0``
     (alike in the native vector env and ``SyncVectorEnv``).
 
     ## Arguments
-    plant : "bouc_wen" (default), "linear", "identified", a nozzle model.json path or a model.
+    plant : "bouc_wen" (default), "linear", "identified", "strong", "strong_linear",
+    "strong_identified" (as NozzleTVC's), a nozzle model.json path or a model.
     reference : as NozzleTVC ("random_steps" by default); reference_amplitude_deg (0-5, default
     2). sensor_noise (rad, default 1e-4). fault : ``{"kind": "gain_loss", "time": 5.0,
     "magnitude": 0.5}`` (servo torque) or ``{"kind": "sensor_bias", "time": 5.0, "magnitude":

@@ -56,7 +56,8 @@ class NozzleTVCEnv(TrackingEnv):
 
     ## Episode End
     Termination on leaving the envelope; truncation after ``episode_seconds`` (4 s, 500 steps).
-    ``step`` after either (or before the first ``reset``) raises
+    ``gymnasium.make`` also applies the registered limit of 500 steps: for longer episodes pass
+    ``max_episode_steps`` too. ``step`` after either (or before the first ``reset``) raises
     :class:`~ssme_envs.envs.tracking_env.EpisodeOverError`: call ``reset``, which takes no options
     (None or ``{}``; else TypeError or ValueError), as in ``EngineTracking-v0``.
 
