@@ -327,6 +327,85 @@ def test_bool_num_envs_and_time_limits_are_refused():
 
 
 @pytest.mark.parametrize(
+    ("profile", "message"),
+    [
+        ([(0.0, 100.0), (1e7, 100.0)], "profile must end within 3600 s"),
+        ([(0.0, 100.0), (10**400, 100.0)], "at least two"),
+        ([(0.0, 100.0), ("a", 100.0)], "at least two"),
+    ],
+)
+def test_a_throttle_profile_is_checked_before_its_table_is_built(profile, message):
+    """1e7 s once built a 3.9 GB table before the episode length was checked."""
+    with pytest.raises(ValueError, match=message):
+        gym.make(THROTTLE, profile=profile)
+
+
+@pytest.mark.parametrize(("b_scale", "lam"), [(1e300, None), (1e4, None), (1.0, 1e308)])
+def test_an_engine_plant_whose_outputs_would_overflow_is_refused(b_scale, lam):
+    """B x 1e300 gave -inf rewards and NaN costs with exit 0; the refusal's bound is checked
+    against a brute-force peak: a full-travel valve step held on the scaled model."""
+    import dataclasses
+
+    from ssme_envs.models.engine import MAX_PEAK_OUTPUT, published_model
+
+    base = published_model(100)
+    model = dataclasses.replace(
+        base, B=base.B * b_scale, lam=base.lam if lam is None else np.array([lam, 1.0])
+    )
+    with np.errstate(over="ignore", invalid="ignore"):
+        x, peak = np.zeros(base.A.shape[0]), 0.0
+        for _ in range(200):  # a step of +1 on both valves through the gains
+            x = model.A @ x + model.B @ (1.0 + np.abs(model.lam - 1.0))
+            peak = max(peak, float(np.abs(model.C @ x).max()))
+    assert not peak <= MAX_PEAK_OUTPUT  # the plant does reach beyond the bound
+    with pytest.raises(ValueError, match="engine plant refused: a valve travel of 1 can drive"):
+        gym.make(TRACKING, plant=model)
+
+
+def test_the_packaged_engine_plants_pass_the_gain_check():
+    for power in (70.0, 80.0, 90.0, 100.0):
+        for plant in ("truth", "identified"):
+            gym.make(TRACKING, plant=plant, power=power).reset(seed=0)
+
+
+def test_a_plant_of_its_own_is_its_truth_design_and_a_design_at_another_dt_is_refused():
+    """An engine plant at dt 0.2 s ran the 0.04 s designs with exit 0."""
+    import dataclasses
+
+    from agents import parse_controller
+    from ssme_envs.models.engine import published_model
+
+    slow = dataclasses.replace(published_model(90), dt=0.2)
+    env = gym.make(TRACKING, plant=slow)
+    assert env.unwrapped.task.design_model("truth") is slow
+    with pytest.raises(ValueError, match=r"identified design model has dt 0.04 s but the env's plant 0.2 s"):
+        env.unwrapped.task.design_model("identified")
+    venv = vector(TRACKING, plant=slow)
+    assert parse_controller("lqi:truth", TRACKING)(venv) is not None
+    with pytest.raises(ValueError, match="design on 'truth'"):
+        parse_controller("lqi", TRACKING)(venv)
+
+
+def test_numpy_integer_counts_are_counts():
+    venv = gym.make_vec(TRACKING, num_envs=np.int64(3), vectorization_mode="vector_entry_point")
+    assert venv.num_envs == 3 and type(venv.num_envs) is int
+    venv.reset(seed=0)
+    assert venv.step(np.zeros((3, 2), np.float32))[0].shape == (3, 10)
+
+
+@pytest.mark.parametrize("env_id", [TRACKING, NOZZLE])
+def test_a_vector_env_too_large_for_memory_is_refused_before_it_is_built(env_id, monkeypatch):
+    """The estimate is its own arithmetic over the task's tables; against it, a limit of 1 GB
+    refuses 10**9 envs (and names the most that fit) and lets 4 pass."""
+    import ssme_envs.cli_checks as checks
+
+    monkeypatch.setattr(checks, "available_memory", lambda: 10**9)
+    with pytest.raises(ValueError, match=r"num_envs 1000000000 needs about .* use at most \d+"):
+        gym.make_vec(env_id, num_envs=10**9, vectorization_mode="vector_entry_point")
+    assert gym.make_vec(env_id, num_envs=4, vectorization_mode="vector_entry_point").num_envs == 4
+
+
+@pytest.mark.parametrize(
     ("env_id", "options", "plain"),
     [
         (NOZZLE, {"sensor_noise": np.float32(2e-4)}, {"sensor_noise": float(np.float32(2e-4))}),

@@ -91,6 +91,10 @@ def test_plant_option_reaches_both_runs_and_uncertainty_draws_from_the_identifie
         (["--env", NOZZLE, "--monte-carlo", "0"], "--monte-carlo must be a positive integer"),
         (["--env", NOZZLE, "--monte-carlo", "2", "--plant-spread", "0.9"], "plant_spread must be in"),
         (["--env", NOZZLE, "--plant", "nope"], "scenario 'step': plant must be one of"),
+        (["--env", NOZZLE, "--monte-carlo", "2", "--plant-spread", "0"], "must be above 0 to draw plants"),
+        (["--env", NOZZLE, "--monte-carlo", "2", "--plant-spread", "-0"], "must be above 0 to draw plants"),
+        (["--env", NOZZLE, "--monte-carlo", "2", "--plant-spread", ""], "must be a number or 'uncertainty'"),
+        (["--env", NOZZLE, "--monte-carlo", "100000000000"], "--monte-carlo 100000000000 needs about"),
         (
             ["--env", "ssme_envs/EngineTracking-v0", "--plant", "identified"],
             "scenario 'bucket': plant='identified'",

@@ -363,3 +363,21 @@ def test_adapter_refuses_what_is_not_per_sub_env(env_id):
     assert over_sync.get_attr("np_random_seed") == [2, 3, 4]
     with pytest.raises(ValueError, match="SAME_STEP"):
         SB3VecEnv(gym.make_vec(env_id, num_envs=2, vectorization_mode="vector_entry_point", **ENVS[env_id]))
+
+
+def test_sub_env_indices_generators_and_seeds_are_checked():
+    """Out-of-range indices gave a bare IndexError, True picked sub-env 1, an int as np_random
+    broke the next reset, and a string seed gave numpy's concatenation error."""
+    from ssme_envs.envs.sb3_adapter import make_sb3_vec_env
+
+    venv = make_sb3_vec_env("ssme_envs/EngineTracking-v0", 2, seed=0)
+    with pytest.raises(IndexError, match="sub-env index 5 out of range for 2"):
+        venv.get_attr("np_random_seed", [5])
+    with pytest.raises(TypeError, match="indices must be sub-env numbers"):
+        venv.get_attr("np_random_seed", True)
+    with pytest.raises(TypeError, match="np_random must be a numpy Generator"):
+        venv.set_attr("np_random", 5)
+    venv.reset()  # still resets: nothing was set
+    assert venv.get_attr("np_random_seed", [1]) == [1]
+    with pytest.raises(TypeError, match="Seed must be an integer"):
+        make_sb3_vec_env("ssme_envs/EngineTracking-v0", 2, seed="x")

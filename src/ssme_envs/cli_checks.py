@@ -148,12 +148,13 @@ def positive_integers(option: str, text: str) -> tuple[int, ...]:
     return values
 
 
-def check_episodes(episodes: int, plan: dict[str, int]) -> None:
-    """Refuse ``--episodes`` whose rollouts would not fit: ``plan`` maps env id -> pairs run."""
-    check_count("--episodes", episodes)
+def check_episodes(episodes: int, plan: dict[str, int], option: str = "--episodes") -> None:
+    """Refuse ``--episodes`` (or the ``option`` that sets them) whose rollouts would not fit:
+    ``plan`` maps env id -> pairs run."""
+    check_count(option, episodes)
     per_episode = sum(evaluation_bytes(env_id, pairs) for env_id, pairs in plan.items())
     pairs = sum(plan.values())
-    check_memory("--episodes", episodes, per_episode, f"{pairs} scenario-controller pairs kept for the plots")
+    check_memory(option, episodes, per_episode, f"{pairs} scenario-controller pairs kept for the plots")
 
 
 def check_vector_sizes(sizes: Sequence[int], env_ids: Sequence[str]) -> None:

@@ -85,7 +85,10 @@ def evaluate_command(args: argparse.Namespace) -> int:
         if args.episodes is not None:
             raise ValueError("give --episodes or --monte-carlo N (N plants, one per episode), not both")
         check_count("--monte-carlo", args.monte_carlo)
-        robust = {"monte_carlo": args.monte_carlo, "plant_spread": args.plant_spread or DEFAULT_SPREAD}
+        robust = {
+            "monte_carlo": args.monte_carlo,
+            "plant_spread": DEFAULT_SPREAD if args.plant_spread is None else args.plant_spread,
+        }
     elif args.plant_spread is not None:
         raise ValueError("--plant-spread applies with --monte-carlo N")
     episodes = 20 if args.episodes is None else args.episodes

@@ -141,7 +141,11 @@ def evaluate_to(
         spread = spread_options(env_id, plant_spread)["plant_spread"]  # checked before any work
         episodes = monte_carlo
     factories = _factories(env_id, controllers, allow_pickle)
-    check_episodes(episodes, {env_id: len(names) * len(factories) * (1 if spread is None else 2)})
+    check_episodes(
+        episodes,
+        {env_id: len(names) * len(factories) * (1 if spread is None else 2)},
+        "--episodes" if spread is None else "--monte-carlo",
+    )
     if command is None:
         runs = (
             f"--episodes {episodes}"

@@ -56,6 +56,9 @@ def spread_options(env_id: str, spread: float | str = DEFAULT_SPREAD) -> dict[st
             spread = float(spread)
         except ValueError:
             raise ValueError(f"plant spread must be a number or 'uncertainty', got {spread!r}") from None
+    # the env takes 0 as one plant in every episode: no Monte Carlo, whatever the table would say
+    if not isinstance(spread, str) and not spread > 0:
+        raise ValueError(f"plant spread must be above 0 to draw plants, got {spread!r}")
     return {"plant_spread": spread}
 
 

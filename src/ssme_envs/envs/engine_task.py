@@ -27,7 +27,7 @@ from ssme_envs.envs.task import (
     check_number,
     check_numbers,
 )
-from ssme_envs.models.engine import TruthConfig, check_stable_plant, output_coupling
+from ssme_envs.models.engine import TruthConfig, check_plant_gain, check_stable_plant, output_coupling
 from ssme_envs.models.engine_nonlinear import NonlinearEngine
 from ssme_envs.models.engine_step import (
     StepParameters,
@@ -93,6 +93,7 @@ class EngineTask:
     offset_table: np.ndarray | None = field(default=None, repr=False)  # (T + 1, m) added to commands
     # the nonlinear engine as the plant (plant="nonlinear"), or None: the point model
     nonlinear: NonlinearPlantCore | None = field(default=None, repr=False)
+    own_plant: AlphaCanonicalModel | None = field(default=None, repr=False)  # plant= a model or file
     # the float core's operands in one tuple (one attribute read a step): pair_rows of K and B,
     # lambda - 1 of each valve, half the backlash, the stiction band
     rows: tuple = field(init=False, repr=False)
@@ -145,6 +146,7 @@ class EngineTask:
                 "outputs are their last two states; identify with --indices 2,2"
             )
         check_stable_plant(model)
+        check_plant_gain(model)
         config = resolve_truth(truth)
         check_reference(reference)
         amplitude = check_numbers("reference_amplitude", reference_amplitude, 2, 0.0, 0.05)
@@ -168,6 +170,8 @@ class EngineTask:
             noise_std=noise,
             fault=Fault.parse(fault, 2, 2),
             operating_power=power,
+            # a plant of the user's own is its own "truth" design model
+            own_plant=None if isinstance(plant, str) and plant in ("truth", "identified") else model,
         )
 
     def __post_init__(self) -> None:
@@ -208,10 +212,20 @@ class EngineTask:
 
     def design_model(self, source: str = "identified") -> AlphaCanonicalModel:
         """The linear model a controller is designed on: :func:`design_model` at the env's power;
-        on the nonlinear plant, ``"truth"`` is its linearization about the trim at that power."""
+        ``"truth"`` on the nonlinear plant is its linearization about the trim at that power, on a
+        plant given as a model (or model.json) that model. ValueError when the design model's
+        sample time is not the plant's."""
         if source == "truth" and self.nonlinear is not None:
             return self.nonlinear.engine.linear_model(self.operating_power)
-        return design_model(self.operating_power, source)
+        if source == "truth" and self.own_plant is not None:
+            return self.own_plant
+        model = design_model(self.operating_power, source)
+        if model.dt != self.dt:  # a design at another sample time would act at the wrong rate
+            raise ValueError(
+                f"the {source} design model has dt {model.dt:g} s but the env's plant {self.dt:g} s: "
+                "design on 'truth' (the plant itself)"
+            )
+        return model
 
     @classmethod
     def observation_space(cls) -> Any:

@@ -14,7 +14,7 @@ from ssme_envs.envs.engine_nonlinear_plant import nonlinear_engine_of, nonlinear
 from ssme_envs.envs.engine_task import EnginePlant, EngineTask, resolve_truth
 from ssme_envs.envs.engine_tracking import EngineTrackingEnv
 from ssme_envs.envs.references import Fault
-from ssme_envs.envs.task import Carrier, Schedule, Value
+from ssme_envs.envs.task import MAX_EPISODE_SECONDS, Carrier, Schedule, Value
 from ssme_envs.models.engine import ENGINE_DT, TruthConfig
 from ssme_envs.models.engine_nonlinear import NonlinearEngine
 from ssme_envs.models.engine_step import (
@@ -37,13 +37,21 @@ MISSION_PROFILE: tuple[tuple[float, float], ...] = (
 
 def power_profile(profile: Sequence[tuple[float, float]], dt: float) -> np.ndarray:
     """Commanded power per sample, % (piecewise linear through the breakpoints)."""
-    points = np.asarray(profile, dtype=float)
+    try:
+        points = np.asarray(profile, dtype=float)
+    except (TypeError, ValueError, OverflowError):  # not numbers, ragged, an int beyond a float
+        points = np.empty(0)
     if points.ndim != 2 or points.shape[1] != 2 or points.shape[0] < 2:
         raise ValueError("profile must be a list of at least two (time s, power %) pairs")
     if not np.all(np.isfinite(points)) or points[0, 0] != 0.0 or np.any(np.diff(points[:, 0]) <= 0):
         raise ValueError("profile times must start at 0 and increase")
     if points[:, 1].min() < POWER_RANGE[0] or points[:, 1].max() > POWER_RANGE[1]:
         raise ValueError(f"profile power must stay within {POWER_RANGE[0]:g}-{POWER_RANGE[1]:g} %")
+    if points[-1, 0] > MAX_EPISODE_SECONDS:  # before the table of every sample is made
+        raise ValueError(
+            f"profile must end within {MAX_EPISODE_SECONDS:g} s (the longest episode), "
+            f"got {points[-1, 0]:g} s"
+        )
     t = np.arange(round(points[-1, 0] / dt) + 1) * dt
     return np.interp(t, points[:, 0], points[:, 1])
 

@@ -74,6 +74,36 @@ def check_seeds(seed: Any, num_envs: int, owner: str) -> list[int | None]:
     return [first + i for i in range(num_envs)]
 
 
+def positive_int(name: str, value: Any) -> int:
+    """``value`` as an int >= 1 (a Python or numpy integer, not a bool), else ValueError."""
+    try:
+        if isinstance(value, bool | np.bool_):
+            raise TypeError
+        number = operator.index(value)
+    except TypeError:
+        number = 0
+    if number < 1:
+        raise ValueError(f"{name} must be a positive integer, got {shown(value)}")
+    return number
+
+
+# what a sub-env holds beside its episode tables: its generator (a Python object and PCG64's
+# state), state columns, observation and bookkeeping rows, with room to spare
+SUB_ENV_BYTES = 4096
+
+
+def check_vector_memory(task: Any, num_envs: int) -> None:
+    """ValueError when ``num_envs`` sub-envs of ``task`` would not fit in memory: per sub-env its
+    episode's references (float64) and unit noise (float32) per channel and step, with the
+    temporaries of a reset computing them (``TRANSIENT_COPIES``), its uniform draws twice
+    (float32, as drawn and transposed), and :data:`SUB_ENV_BYTES`."""
+    from ssme_envs.cli_checks import TRANSIENT_COPIES, check_memory
+
+    steps = task.n_channels * (task.horizon + 1)
+    tables = 12 * steps * (1 + TRANSIENT_COPIES) + 8 * task.draw_size
+    check_memory("num_envs", num_envs, tables + SUB_ENV_BYTES, "each sub-env's episode tables")
+
+
 def _floats(values: Iterable[Any], action: Any, name: str = "action") -> list[float] | None:
     """``values`` as Python floats, None if one is not a real number; ValueError for an integer
     too large for a float (``float()`` raises OverflowError on it)."""
@@ -154,7 +184,7 @@ def batch_actions(actions: Any) -> np.ndarray:
         if floats is not None:
             return np.array(floats, dtype=np.float64).reshape(array.shape)
     elif array.dtype.kind in REAL_KINDS:
-        if array is actions or not _holds_bool(actions):  # numpy reads a mixed list's bools as 0, 1
+        if not isinstance(actions, list | tuple) or not _holds_bool(actions):  # numpy reads bools as 0, 1
             return array.astype(np.float64)
         what = f"a {type(actions).__name__} holding bools"
     raise ActionTypeError(
@@ -163,6 +193,7 @@ def batch_actions(actions: Any) -> np.ndarray:
 
 
 __all__ = [
+    "SUB_ENV_BYTES",
     "ActionTypeError",
     "SeedTypeError",
     "SeedValueError",
@@ -170,4 +201,6 @@ __all__ = [
     "batch_actions",
     "check_seed",
     "check_seeds",
+    "check_vector_memory",
+    "positive_int",
 ]

@@ -31,6 +31,8 @@ from gymnasium.vector import AutoresetMode
 from stable_baselines3.common.env_util import is_wrapped
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices, VecEnvStepReturn
 
+from ssme_envs.envs.inputs import check_seed
+
 FINAL_KEYS = ("final_obs", "_final_obs", "final_info", "_final_info")
 
 
@@ -64,7 +66,7 @@ class SB3VecEnv(VecEnv):
             vector_env.num_envs, vector_env.single_observation_space, vector_env.single_action_space
         )
         if seed is not None:
-            self.seed(seed)
+            self.seed(check_seed(seed, type(self).__name__))
         self._actions: np.ndarray | None = None
 
     def reset(self) -> np.ndarray:
@@ -146,7 +148,15 @@ class SB3VecEnv(VecEnv):
         return [wrapped] * len(targets)
 
     def _targets(self, indices: VecEnvIndices) -> list[Any]:
-        return [self._sub_envs[i] for i in self._get_indices(indices)]
+        """The sub-envs of ``indices`` (None: all; an int or ints, negative ones counted from the
+        end as in a list), checked."""
+        chosen = list(self._get_indices(indices))
+        for i in chosen:
+            if isinstance(i, bool | np.bool_) or not isinstance(i, int | np.integer):
+                raise TypeError(f"indices must be sub-env numbers (ints), got {i!r}")
+            if not -self.num_envs <= i < self.num_envs:
+                raise IndexError(f"sub-env index {i} out of range for {self.num_envs} sub-envs")
+        return [self._sub_envs[i] for i in chosen]
 
 
 def _sub_info(info: dict[str, Any], i: int) -> dict[str, Any]:

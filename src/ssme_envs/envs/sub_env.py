@@ -87,6 +87,8 @@ class SubEnv:
 
     @np_random.setter
     def np_random(self, value: np.random.Generator) -> None:
+        if not isinstance(value, np.random.Generator):  # else the next reset fails, far from here
+            raise TypeError(f"np_random must be a numpy Generator, got {type(value).__name__}")
         self._venv._rngs[self._index] = value
         self._venv._seeds[self._index] = -1
 

@@ -26,7 +26,7 @@ from gymnasium.vector.utils import batch_space
 
 from ssme_envs.envs.engine_task import EngineTask
 from ssme_envs.envs.engine_throttle import ThrottleTask
-from ssme_envs.envs.inputs import batch_actions, check_seeds
+from ssme_envs.envs.inputs import batch_actions, check_seeds, check_vector_memory, positive_int
 from ssme_envs.envs.launcher_pitch import LauncherTask
 from ssme_envs.envs.nozzle_task import NozzleTask
 from ssme_envs.envs.sub_env import SubEnv, reset_mask
@@ -81,14 +81,9 @@ class TrackingVectorEnv(VectorEnv):
         max_episode_steps: int | None = None,
         **options: Any,
     ) -> None:
-        if isinstance(num_envs, bool) or not isinstance(num_envs, int) or num_envs < 1:
-            raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
-        if max_episode_steps is not None and (
-            isinstance(max_episode_steps, bool)
-            or not isinstance(max_episode_steps, int)
-            or max_episode_steps < 1
-        ):
-            raise ValueError(f"max_episode_steps must be a positive integer, got {max_episode_steps!r}")
+        num_envs = positive_int("num_envs", num_envs)
+        if max_episode_steps is not None:
+            max_episode_steps = positive_int("max_episode_steps", max_episode_steps)
         if render_mode is not None:
             raise ValueError("the native vector env does not render; render a single env instead")
         try:
@@ -98,6 +93,7 @@ class TrackingVectorEnv(VectorEnv):
                 f"autoreset_mode must be one of {[m.value for m in AutoresetMode]}, got {autoreset_mode!r}"
             ) from None
         self.task = self.build_task(**options)
+        check_vector_memory(self.task, num_envs)  # before a table or generator is made
         # Episodes are drawn at the task's full length, as the scalar env draws them, whatever
         # the time limit, so that both consume their generators alike.
         self._limit = min(self.task.horizon, max_episode_steps or self.task.horizon)

@@ -21,6 +21,7 @@ Valve nonlinearities (defaults are assumptions: the paper gives no widths):
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass
 from functools import cache
 from importlib import resources
@@ -128,6 +129,29 @@ def check_stable_plant(model: AlphaCanonicalModel) -> None:
             f"engine plant refused: A has spectral radius {radius:.6g} >= 1 (an eigenvalue on or "
             "outside the unit circle), so its open-loop state grows without bound; the envs need a "
             "stable model (the identified SSME models have 0.55-0.65)"
+        )
+
+
+# normalized output (1 = the 100 % value) that no engine plant reaches under full valve travel:
+# the SSME's models stay below 5 (see check_plant_gain); beyond, a model is a unit mistake or a
+# failed fit, and near 1e150 its rewards overflow to -inf
+MAX_PEAK_OUTPUT = 1e3
+
+
+def check_plant_gain(model: AlphaCanonicalModel, travel: float = 1.0) -> None:
+    """Refuse (ValueError) a stable model whose outputs a valve travel of ``travel`` (normalized,
+    each valve, through the lambda gains) can drive beyond :data:`MAX_PEAK_OUTPUT`: the bound is
+    the l1 norm of its impulse response (Markov parameters until A^k has decayed by 1e-12)."""
+    radius = model.spectral_radius()
+    decay = math.ceil(math.log(1e-12) / math.log(radius)) if 0.0 < radius < 1.0 else 1
+    with np.errstate(over="ignore", invalid="ignore"):
+        l1 = np.abs(model.markov_parameters(min(decay, 10_000) + model.A.shape[0])).sum(axis=0)
+        peak = float((l1 * (1.0 + np.abs(model.lam - 1.0))).sum(axis=1).max() * travel)
+    if not peak <= MAX_PEAK_OUTPUT:
+        raise ValueError(
+            f"engine plant refused: a valve travel of {travel:g} can drive an output to {peak:.3g} "
+            f"(normalized; at most {MAX_PEAK_OUTPUT:g} is taken, the SSME models reach below 5): "
+            "check the model's B, K and lambda and their units"
         )
 
 
