@@ -4,6 +4,7 @@ earlier run in --out intact, nothing partial beside it). Then kills and Ctrl-C o
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import json
 import os
@@ -13,6 +14,7 @@ import signal
 import subprocess
 import sys
 import textwrap
+import threading
 import time
 from pathlib import Path
 
@@ -89,6 +91,8 @@ VALIDATE = ["validate", "engine", "--model", "{d}/bad.json", "--data", "{d}/r.cs
 NOZZLE_EVAL = ["evaluate", "--env", "ssme_envs/NozzleTVC-v0", "--controllers", "zero", "--scenario", "step"]
 EVAL = [*NOZZLE_EVAL, "--out", "{d}/out"]
 DEEP = "[" * 100_000 + "]" * 100_000
+PLANT_EVAL = ["evaluate", "--env", "ssme_envs/EngineTracking-v0", "--controllers", "pi", "--scenario",
+              "pc_step", "--episodes", "1", "--plant", "{d}/bad.json", "--out", "{d}/out"]  # fmt: skip
 
 # (id, input, argv, files under {d}: name -> bytes, "dir" or "asset:<name>", expected, patch, code)
 CATALOGUE = [
@@ -146,6 +150,9 @@ CATALOGUE = [
      "not valid JSON", None, 2),
     ("model-directory", "--model is a directory", VALIDATE, {"r.csv": "asset:r.csv", "bad.json": "dir"},
      "not valid JSON", None, 2),
+    ("model-device", "--model /dev/null", [*VALIDATE[:3], os.devnull, *VALIDATE[4:]],
+     {"r.csv": "asset:r.csv"}, f"{os.devnull}: not valid JSON: it is a character device, not a regular file",
+     None, 2),
     ("model-list", "a JSON list", VALIDATE, {"r.csv": "asset:r.csv", "bad.json": b"[]"},
      "expected a JSON object, got list", None, 2),
     ("model-no-A", "A missing", VALIDATE, {"r.csv": "asset:r.csv", "bad.json": "drop:A"},
@@ -164,6 +171,20 @@ CATALOGUE = [
     ("model-dt-bigint", "dt = 10**400", VALIDATE, {"r.csv": "asset:r.csv",
      "bad.json": "set:dt:1" + "0" * 400},
      "bad.json: not an engine model", None, 2),
+    ("model-dt-bigint-named", "dt = 10**400", VALIDATE, {"r.csv": "asset:r.csv",
+     "bad.json": "set:dt:1" + "0" * 400},
+     "bad.json: not an engine model: dt must be a positive number of seconds, got an integer of about "
+     "401 digits",
+     None, 2),
+    ("model-5001-digits", "dt = 10**5000", VALIDATE, {"r.csv": "asset:r.csv",
+     "bad.json": "set:dt:1" + "0" * 5000},
+     r"bad.json: a number in it is too long to read \(Exceeds the limit \(4300 digits\)", None, 2),
+    ("model-states", "A with 513 rows", VALIDATE,
+     {"r.csv": "asset:r.csv", "bad.json": "set:A:[" + "[0], " * 512 + "[0]]"},
+     r"bad.json: A has 513 rows \(states\); a model file holds at most 512", None, 2),
+    ("plant-lambda-object", "evaluate --plant with lambda an object", PLANT_EVAL,
+     {"bad.json": 'set:lambda:{"a": 1}'},
+     "bad.json: not an engine model: lambda must be a list of 2 finite gains", None, 2),
     ("model-dt-text", "dt a string", VALIDATE, {"r.csv": "asset:r.csv", "bad.json": 'set:dt:"fast"'},
      "dt must be a positive number", None, 2),
     ("model-B-shape", "B 3 rows", VALIDATE,
@@ -210,6 +231,13 @@ CATALOGUE = [
      None, 2),
     ("dt-negative", "--dt -0.04", [*ENGINE, "--dt", "-0.04"], {"r.csv": "asset:r.csv"},
      "--dt must be a positive",
+     None, 2),
+    ("dt-over-a-day", "--dt 1e300", [*ENGINE, "--dt", "1e300"], {"r.csv": "asset:r.csv"},
+     r"--dt must be at most 86400 s \(a day\)", None, 2),
+    ("nozzle-dt-over-a-day", "identify nozzle --dt 1e300", ["identify", "nozzle", "--data", "{d}/r.csv",
+     "--dt", "1e300", "--out", "{d}/out"], {"r.csv": "asset:r.csv"}, "--dt must be at most 86400 s", None, 2),
+    ("validate-dt-over-a-day", "validate engine --dt 1e300", [*VALIDATE[:3], "{d}/m.json", *VALIDATE[4:],
+     "--dt", "1e300"], {"r.csv": "asset:r.csv", "m.json": "asset:m.json"}, "--dt must be at most 86400 s",
      None, 2),
     ("rank-tol-nan", "--rank-tol nan", [*ENGINE, "--rank-tol", "nan"], {"r.csv": "asset:r.csv"},
      "--rank-tol must be a finite", None, 2),
@@ -330,6 +358,26 @@ def test_catalogue_unwritable_parent(tmp_path, capsys):
     assert code == 2 and re.fullmatch(r"error: [^\n]+\n", err), err
     assert re.search("Permission denied|Operation not permitted|Read-only", err), err
     assert not (parent / "out").exists()
+
+
+def test_a_fifo_named_as_the_model_is_refused_without_waiting_for_a_writer(tmp_path, capsys, assets):
+    (tmp_path / "r.csv").write_bytes(assets["r.csv"])
+    fifo = tmp_path / "x.json"
+    os.mkfifo(fifo)
+
+    def unblock() -> None:  # a loader blocked opening the FIFO then reads end of file: a failure, not a hang
+        time.sleep(5.0)
+        with contextlib.suppress(OSError):  # no reader waiting: nothing to unblock
+            os.close(os.open(fifo, os.O_WRONLY | os.O_NONBLOCK))
+
+    threading.Thread(target=unblock, daemon=True).start()
+    argv = [a.format(d=tmp_path) for a in VALIDATE]
+    argv[3] = str(fifo)
+    start = time.perf_counter()
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err == f"error: {fifo}: not valid JSON: it is a FIFO (named pipe), not a regular file\n", err
+    assert time.perf_counter() - start < 5.0
 
 
 def test_no_command_prints_the_usage_and_exits_2(capsys):

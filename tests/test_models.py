@@ -3,11 +3,23 @@
 from __future__ import annotations
 
 import json
+import os
+import re
+import threading
+import time
 
 import numpy as np
 import pytest
 
-from ssme_envs.models import AlphaCanonicalModel, asymmetric_gain, published_model
+from ssme_envs.models import (
+    AlphaCanonicalModel,
+    AlphaStructure,
+    asymmetric_gain,
+    identified_model,
+    published_model,
+)
+from ssme_envs.models.nozzle import NozzleModel, identified_nozzle
+from ssme_envs.models.statespace_json import MAX_JSON_BYTES, MAX_MODEL_STATES
 
 # Table I of NASA TM-104422 as printed: per power level, columns 3 and 4 of A (column by
 # column), then B column by column, then lambda_1 and lambda_2. Transcribed from the paper.
@@ -132,3 +144,174 @@ def test_nan_model_is_not_written(tmp_path):
     model.fit["see"] = [float("nan")]
     with pytest.raises(ValueError):
         model.save(tmp_path / "m.json")
+
+
+# --- model files: size, types and special files
+
+
+def _wide_model(pairs: int) -> AlphaCanonicalModel:
+    """An alpha-canonical model with indices (2, 1) * pairs: 3 pairs states, 2 pairs outputs,
+    coupled outputs (H != I, so K is a triangular solve), small random free parameters."""
+    indices = (2, 1) * pairs
+    s = AlphaStructure.from_indices(indices)
+    template = AlphaCanonicalModel(
+        A=s.shift_matrix(),
+        B=np.zeros((s.n_states, 2)),
+        C=s.output_matrix(),
+        dt=0.04,
+        observability_indices=indices,
+        lam=[1.0, 1.0],
+        output_names=[f"y{k}" for k in range(s.n_outputs)],
+    )
+    values = np.random.default_rng(0).integers(-3, 4, template.parameter_vector().size) / 1000
+    values[-2:] = 1.0
+    return template.with_parameters(values)
+
+
+def test_a_model_with_many_outputs_and_mixed_indices_loads_in_well_under_a_second(tmp_path):
+    # 510 states, 340 outputs: the residual check took 43 s (K recomputed per entry), now 0.04 s
+    model = _wide_model(170)
+    assert model.n_states <= MAX_MODEL_STATES and not np.array_equal(model.H, np.eye(model.n_outputs))
+    path = tmp_path / "wide.json"
+    model.save(path)
+    start = time.perf_counter()
+    back = AlphaCanonicalModel.load(path)
+    assert time.perf_counter() - start < 10.0
+    np.testing.assert_array_equal(back.A, model.A)
+    assert back.alpha_canonical_residual() < 1e-15
+    doc = json.loads(path.read_text())
+    # K[(0, 0), last output] is fixed at zero by eq 8 (index 2 > 1); H's last column is e_p
+    doc["A"][model.structure.position(0, 0)][-1] += 0.5
+    path.write_text(json.dumps(doc))
+    with pytest.raises(ValueError, match=r"not in alpha-canonical form .*violation of eqs 5-8: 0\.5"):
+        AlphaCanonicalModel.load(path)
+
+
+def test_a_model_file_with_more_states_than_the_cap_is_refused_before_building_them(tmp_path):
+    doc = _doc()
+    doc["A"] = [[0.0]] * (MAX_MODEL_STATES + 1)
+    path = tmp_path / "huge.json"
+    path.write_text(json.dumps(doc))
+    with pytest.raises(
+        ValueError, match=rf"huge.json: A has {MAX_MODEL_STATES + 1} rows \(states\); .*at most"
+    ):
+        AlphaCanonicalModel.load(path)
+
+
+ENGINE_BAD_TYPES = {
+    "lambda-object": ("lambda", {"a": 1}, r"lambda must be a list of 2 finite gains"),
+    "lambda-bigint": ("lambda", [1, 10**400], r"lambda must be .*: it holds an integer too large"),
+    "dt-bigint": ("dt", 10**400, r"dt must be a positive number of seconds, got an integer of about 401"),
+    "A-bigint": ("A", [[10**400, 0, 0, 0]] * 4, r"A must be a numeric matrix .*integer too large"),
+    "version-true": ("schema_version", True, r"unsupported schema_version True"),
+    "indices-bool": ("observability_indices", [True, 3], r"observability_indices must be a list of integers"),
+}
+
+
+@pytest.mark.parametrize(("key", "value", "message"), ENGINE_BAD_TYPES.values(), ids=ENGINE_BAD_TYPES)
+def test_badly_typed_engine_values_are_value_errors_naming_file_and_key(tmp_path, key, value, message):
+    doc = _doc()
+    doc[key] = value
+    path = tmp_path / "model.json"
+    path.write_text(json.dumps(doc))
+    with pytest.raises(ValueError, match=re.escape(f"{path}: ") + "(not an engine model: )?" + message):
+        AlphaCanonicalModel.load(path)
+
+
+def _nozzle_doc(section: str | None, key: str, value) -> dict:
+    doc = identified_nozzle().to_dict()
+    (doc if section is None else doc[section])[key] = value
+    return doc
+
+
+@pytest.mark.parametrize(
+    ("section", "key", "value", "message"),
+    [
+        ("bouc_wen", "J", 10**400, r"nozzle parameter J must be a finite number, got an integer of about"),
+        ("linear", "A", [[10**400]], r"linear.A must be a numeric matrix .*integer too large for a float"),
+        ("linear", "dt", 10**400, r"linear.dt must be a finite number, got an integer of about 401 digits"),
+        ("linear", "k", -(10**400), r"linear.k must be a finite number"),
+        (None, "schema_version", True, r"unsupported schema_version True"),
+    ],
+    ids=["bw-J-bigint", "lin-A-bigint", "lin-dt-bigint", "lin-k-bigint", "version-true"],
+)
+def test_badly_typed_nozzle_values_are_value_errors_naming_file_and_key(
+    tmp_path, section, key, value, message
+):
+    path = tmp_path / "nozzle.json"
+    path.write_text(json.dumps(_nozzle_doc(section, key, value)))
+    with pytest.raises(ValueError, match=re.escape(f"{path}: ") + message):
+        NozzleModel.load(path)
+
+
+@pytest.mark.parametrize(
+    ("load", "section"),
+    [(AlphaCanonicalModel.load, None), (NozzleModel.load, "linear"), (NozzleModel.load, "bouc_wen")],
+    ids=["engine", "nozzle-linear", "nozzle-bouc-wen"],
+)
+def test_an_uncertainty_covariance_past_float_range_is_a_value_error_naming_it(tmp_path, load, section):
+    doc = identified_model(100).to_dict() if section is None else identified_nozzle().to_dict()
+    block = doc["uncertainty"] if section is None else doc[section]["uncertainty"]
+    block["covariance"][0][0] = 10**400
+    path = tmp_path / "model.json"
+    path.write_text(json.dumps(doc))
+    where = "uncertainty" if section is None else f"{section}.uncertainty"
+    with pytest.raises(
+        ValueError, match=re.escape(f"{path}: {where} holds an integer too large for a float")
+    ):
+        load(path)
+
+
+@pytest.mark.parametrize("load", [AlphaCanonicalModel.load, NozzleModel.load], ids=["engine", "nozzle"])
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("[" * 100_000 + "]" * 100_000, "nested too deeply to read as JSON"),
+        ('{"a":' * 100_000 + "1" + "}" * 100_000, "nested too deeply to read as JSON"),
+        ('{"dt": 1' + "0" * 5000 + "}", r"a number in it is too long to read \(Exceeds the limit"),
+    ],
+    ids=["deep-lists", "deep-objects", "5001-digits"],
+)
+def test_unreadable_json_is_a_value_error_naming_the_file(tmp_path, load, text, message):
+    path = tmp_path / "model.json"
+    path.write_text(text)
+    with pytest.raises(ValueError, match=re.escape(f"{path}: ") + message):
+        load(path)
+
+
+def _unblock_fifo_after(path, seconds: float) -> None:
+    """Open ``path`` for writing after ``seconds``: a loader blocked opening it then reads end of
+    file (and fails the test) instead of hanging it."""
+
+    def run() -> None:
+        time.sleep(seconds)
+        try:
+            os.close(os.open(path, os.O_WRONLY | os.O_NONBLOCK))
+        except OSError:
+            pass  # no reader waiting on it: the loader did not block
+
+    threading.Thread(target=run, daemon=True).start()
+
+
+@pytest.mark.parametrize("load", [AlphaCanonicalModel.load, NozzleModel.load], ids=["engine", "nozzle"])
+def test_special_files_are_refused_naming_the_path(tmp_path, load):
+    fifo = tmp_path / "x.json"
+    os.mkfifo(fifo)
+    _unblock_fifo_after(fifo, 5.0)
+    with pytest.raises(
+        ValueError, match=re.escape(f"{fifo}: not valid JSON: it is a FIFO (named pipe), not a regular file")
+    ):
+        load(fifo)
+    link = tmp_path / "device.json"
+    link.symlink_to(os.devnull)  # a device behind a link; /dev/zero would read forever
+    for path in (os.devnull, link):
+        with pytest.raises(ValueError, match=re.escape(f"{path}: not valid JSON: it is a character device")):
+            load(path)
+    directory = f"{tmp_path}: not valid JSON: it is a directory, not a regular file"
+    with pytest.raises(ValueError, match=re.escape(directory)):
+        load(tmp_path)
+    big = tmp_path / "big.json"
+    with big.open("wb") as file:
+        file.truncate(MAX_JSON_BYTES + 1)  # sparse: no disk used
+    with pytest.raises(ValueError, match=re.escape(f"{big}: larger than 64 MiB, too large for a model file")):
+        load(big)

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import re
+import warnings
 
 import numpy as np
 import pytest
@@ -10,6 +12,7 @@ import scipy.signal
 from conftest import dlsim
 
 from ssme_envs.cli import main
+from ssme_envs.identification import nozzle_pipeline
 from ssme_envs.identification.bouc_wen import NORMALIZED_NAMES, fit_bouc_wen
 from ssme_envs.identification.nozzle_pipeline import (
     NozzleRecord,
@@ -19,7 +22,9 @@ from ssme_envs.identification.nozzle_pipeline import (
     bench_experiment,
     bench_motion,
     identify_nozzle,
+    read_nozzle_record,
     run_default,
+    simulate_joint,
     strong_hysteresis_nozzle,
     validate_nozzle,
     validation_experiment,
@@ -30,10 +35,12 @@ from ssme_envs.identification.nozzle_uncertainty import dsr_e_uncertainty, regre
 from ssme_envs.identification.subspace import dsr_e, second_order_parameters
 from ssme_envs.models.nozzle import (
     IDENTIFIED_FILES,
+    MAX_SUBSTEPS,
     NozzleModel,
     NozzleParameters,
     identified_nozzle,
     published_nozzle,
+    recommended_substeps,
     simulate_nozzle,
 )
 from ssme_envs.signals import prbs
@@ -156,6 +163,17 @@ def test_cli_identifies_a_user_csv(tmp_path, capsys, strong):
         assert png in report and (out / png).stat().st_size > 10_000
 
 
+def _record_rows(tau_scale: float = 1.0, beta_scale: float = 1.0, spike: float | None = None) -> str:
+    """A valid 400-sample record (square-wave torque, angle from rest), scaled; ``spike``: the angle
+    at sample 5."""
+    beta = 1e-4 * np.sin(np.arange(400) / 10) * beta_scale
+    if spike is not None:
+        beta[5] = spike
+    return "t,tau,beta\n" + "".join(
+        f"{0.008 * i!r},{1000.0 * tau_scale * (-1) ** (i // 3)!r},{float(beta[i])!r}\n" for i in range(400)
+    )
+
+
 @pytest.mark.parametrize(
     ("content", "extra", "message"),
     [
@@ -172,6 +190,12 @@ def test_cli_identifies_a_user_csv(tmp_path, capsys, strong):
             "samples",
         ),
         ("t,tau,beta\n0,nan,0\n0.008,1,1\n", [], "NaN"),
+        pytest.param(
+            _record_rows(1e155, 1e155),
+            [],
+            "input 'tau' reaches 1e+158: its squares overflow float64",
+            id="values-scaled-by-1e155",
+        ),
         ("t,tau,beta\n0,1,0\n0.008,2,1\n", ["--normalization-a", "0"], "--normalization-a"),
         ("t,tau,beta\n0,1,0\n0.008,2,1\n", ["--workers", "0"], "--workers"),
     ],
@@ -245,6 +269,72 @@ def test_angle_offset_is_refused():
     record = bench_experiment(published_nozzle(), samples=600)
     with pytest.raises(ValueError, match="not at rest at zero"):
         fit_bouc_wen(record.tau, record.beta + 0.01, 0.008, workers=1)
+
+
+# --- records with absurd values: angles past a quarter turn, values whose squares overflow --------
+
+
+@pytest.mark.parametrize(
+    ("tau_scale", "beta_scale", "spike", "message"),
+    [
+        (1.0, 1.0, 1e5, r"output 'beta' reaches 1e\+05 at sample 5, beyond \+-1\.571 rad \(90 deg\)"),
+        (1.0, 1.0, -2.0, r"output 'beta' reaches -2 at sample 5, beyond"),
+        (1.0, 1e6, None, r"output 'beta' reaches 9\.983 at sample 1, beyond"),  # beta in microrad
+        (1e155, 1e155, None, r"input 'tau' reaches 1e\+158: its squares overflow float64"),
+        (1.0, 1e160, None, r"output 'beta' reaches 1e\+156: its squares overflow float64"),
+    ],
+)
+def test_read_nozzle_record_refuses_absurd_values_naming_the_column(
+    tmp_path, tau_scale, beta_scale, spike, message
+):
+    path = tmp_path / "rec.csv"
+    path.write_text(_record_rows(tau_scale, beta_scale, spike))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # refused before any arithmetic that would overflow
+        with pytest.raises(ValueError, match=rf"^{re.escape(str(path))}: {message}"):
+            read_nozzle_record(path)
+
+
+def test_read_nozzle_record_keeps_angles_within_a_quarter_turn(tmp_path):
+    path = tmp_path / "rec.csv"
+    path.write_text(_record_rows(beta_scale=1.5e4))  # up to 1.5 rad
+    record = read_nozzle_record(path)
+    assert np.max(np.abs(record.beta)) == pytest.approx(1.5, rel=1e-3)
+
+
+def test_cli_refuses_an_angle_spike_in_the_validation_record_before_the_fit(tmp_path, capsys, monkeypatch):
+    """The spike (1e5 rad) once sent the validation's joint simulation into 9e5 RK4 substeps a
+    sample, after the whole fit: it never ended."""
+
+    def fit(*args, **kwargs):
+        raise AssertionError("the fit ran")
+
+    monkeypatch.setattr(nozzle_pipeline, "identify_nozzle", fit)
+    data, check = tmp_path / "data.csv", tmp_path / "check.csv"
+    data.write_text(_record_rows())
+    check.write_text(_record_rows(spike=1e5))
+    code = main(
+        ["identify", "nozzle", "--data", str(data), "--validate", str(check), "--out", str(tmp_path / "o")]
+    )
+    err = capsys.readouterr().err
+    assert (
+        code == 2 and err.startswith(f"error: {check}: output 'beta' reaches 1e+05") and err.count("\n") == 1
+    )
+    assert not (tmp_path / "o").exists()
+
+
+def test_simulate_joint_refuses_more_rk4_substeps_than_the_cap():
+    joint = published_nozzle("bouc_wen")
+    beta = np.zeros(20)
+    beta[5] = 3e3  # rad: the joint's hysteresis rate grows with the amplitude
+    record = NozzleRecord(1000.0 * (-1.0) ** np.arange(20), beta, 0.008)
+    assert recommended_substeps(joint, 0.008, 3e3) > MAX_SUBSTEPS
+    with pytest.raises(
+        ValueError, match=r"up to 3000 rad needs \d+ RK4 substeps per 0\.008 s sample, more than 10000"
+    ):
+        simulate_joint(joint, record)
+    record.beta[5] = 0.05
+    assert np.all(np.isfinite(simulate_joint(joint, record)))
 
 
 # --- uncertainty: J, b, k by the residual bootstrap, the Bouc-Wen regression covariance, model.json

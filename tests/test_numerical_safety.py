@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import warnings
 from typing import Any
 
@@ -445,3 +446,36 @@ def test_unstable_engine_plants_are_refused(scale, tmp_path):
             with pytest.raises(ValueError, match=r"spectral radius .* >= 1"):
                 make()
     gym.make(ENGINE, plant=_scaled_engine(1.0)).reset(seed=0)  # the stable one still loads
+
+
+# --- plant files the envs are given by path: a bad type is a ValueError naming the file and key
+
+
+@pytest.mark.parametrize(
+    ("env_id", "where", "value", "message"),
+    [
+        (ENGINE, "lambda", {"a": 1}, "not an engine model: lambda must be a list of 2 finite gains"),
+        (ENGINE, "dt", 10**400, "not an engine model: dt must be a positive number of seconds, got an int"),
+        (NOZZLE, "bouc_wen.J", 10**400, "nozzle parameter J must be a finite number, got an integer"),
+        (NOZZLE, "linear.A", [[10**400] * 4] * 4, "linear.A must be a numeric matrix .*integer too large"),
+    ],
+    ids=["engine-lambda-object", "engine-dt-bigint", "nozzle-bw-J-bigint", "nozzle-lin-A-bigint"],
+)
+def test_badly_typed_plant_files_are_value_errors_naming_file_and_key(
+    tmp_path, env_id, where, value, message
+):
+    doc = (identified_model(100) if env_id == ENGINE else identified_nozzle()).to_dict()
+    *section, key = where.split(".")
+    (doc[section[0]] if section else doc)[key] = value
+    path = tmp_path / "plant.json"
+    path.write_text(json.dumps(doc))
+    with pytest.raises(ValueError, match=re.escape(f"{path}: ") + message):
+        gym.make(env_id, plant=str(path))
+
+
+@pytest.mark.parametrize("env_id", [ENGINE, NOZZLE])
+def test_a_deeply_nested_plant_file_is_a_value_error_naming_it(tmp_path, env_id):
+    path = tmp_path / "deep.json"
+    path.write_text("[" * 100_000 + "]" * 100_000)
+    with pytest.raises(ValueError, match=re.escape(f"{path}: nested too deeply to read as JSON")):
+        gym.make(env_id, plant=str(path))

@@ -1,17 +1,26 @@
-"""CSV records: duplicated header names, a UTF-8 BOM, degenerate validation records, and
-`ssme-envs validate engine` keeping records that share a file name apart."""
+"""CSV records: duplicated header names, a UTF-8 BOM, degenerate validation records,
+`ssme-envs validate engine` keeping records that share a file name apart, epoch-style time
+stamps, columns left unread, sample times over a day, special and oversized files."""
 
 from __future__ import annotations
 
+import os
 import re
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from ssme_envs.cli import main
-from ssme_envs.identification.records import check_validation_record, read_columns, record_labels
+from ssme_envs.identification.records import (
+    MAX_CSV_BYTES,
+    check_validation_record,
+    read_columns,
+    read_text,
+    record_labels,
+)
 from ssme_envs.models import identified_model
 
 DT = 0.04  # the packaged engine models' sample time
@@ -219,3 +228,159 @@ def test_cli_validate_keeps_records_with_the_same_file_name_apart(tmp_path, caps
     assert rows[1] != rows[3]  # the two model rows are the two different records' scores
     for png in ("run.png", "run_2.png", "other.png"):
         assert f"]({png})" in report and (out / png).stat().st_size > 1000
+
+
+# --- time base, unused columns, number syntax -----------------------------------------------------
+
+COLUMNS = ["beta_opov", "beta_fpov", "pc", "mr"]
+
+
+def _write(path, header, rows):
+    path.write_text(header + "\n" + "\n".join(rows) + "\n", encoding="utf-8")
+    return path
+
+
+def test_epoch_style_time_column_is_uniform(tmp_path):
+    """t = 1e9 + 0.04 k: each stamp is rounded to 1.2e-7 s, so steps read 0.0399999 to 0.0400001 s."""
+    data = _good()
+    t = 1e9 + DT * np.arange(SAMPLES)
+    path = _write(
+        tmp_path / "epoch.csv",
+        ",".join(HEADER),
+        [",".join(repr(float(v)) for v in r) for r in np.c_[t, data]],
+    )
+    assert np.ptp(np.diff(t)) > 1e-6 * DT  # irregular at the old tolerance
+    got, dt = read_columns(path, COLUMNS)
+    np.testing.assert_array_equal(got, data)
+    assert dt == pytest.approx(DT, rel=1e-9)  # the fit over all stamps, not one rounded step
+    assert read_columns(path, COLUMNS, dt=DT)[1] == dt  # a given dt agrees with it
+    t[30:] += 0.01  # one step of 0.05 s among 0.04 s ones is still irregular there
+    irregular = _write(
+        tmp_path / "gap.csv", ",".join(HEADER), [",".join(repr(float(v)) for v in r) for r in np.c_[t, data]]
+    )
+    with pytest.raises(ValueError, match=r"gap\.csv: column 't' is not uniformly spaced"):
+        read_columns(irregular, COLUMNS)
+
+
+def test_time_stamps_too_coarse_for_their_steps_are_refused(tmp_path):
+    t = 1e15 + 0.25 * np.arange(SAMPLES)  # floats near 1e15 are 0.125 s apart
+    path = _write(
+        tmp_path / "coarse.csv",
+        ",".join(HEADER),
+        [",".join(repr(float(v)) for v in r) for r in np.c_[t, _good()]],
+    )
+    with pytest.raises(ValueError, match=r"coarse\.csv: column 't' cannot resolve its steps of 0\.25 s"):
+        read_columns(path, COLUMNS)
+
+
+@pytest.mark.parametrize(
+    ("extra_header", "extra_cell"),
+    [(",note", ",ok"), (",", ","), (",,,", ",,,"), (",note,", ",see log,")],
+    ids=["text-column", "trailing-comma", "three-trailing-commas", "text-and-trailing"],
+)
+def test_columns_not_read_need_not_be_numbers(tmp_path, extra_header, extra_cell):
+    data = _good()
+    rows = [",".join(repr(float(v)) for v in r) + extra_cell for r in np.c_[DT * np.arange(SAMPLES), data]]
+    path = _write(tmp_path / "extra.csv", ",".join(HEADER) + extra_header, rows)
+    got, dt = read_columns(path, COLUMNS)
+    np.testing.assert_array_equal(got, data)
+    assert dt == pytest.approx(DT)
+
+
+@pytest.mark.parametrize(
+    ("column", "cell"),
+    [("pc", "ok"), ("t", "soon"), ("mr", "1_0"), ("beta_opov", "-0_01"), ("t", "0_0")],
+)
+def test_non_numbers_in_columns_read_are_refused(tmp_path, column, cell):
+    """Including Python's underscores, which float() reads (1_0 as 10) but CSV has no place for."""
+    rows = [",".join(repr(float(v)) for v in r) for r in np.c_[DT * np.arange(SAMPLES), _good()]]
+    cells = rows[3].split(",")
+    cells[HEADER.index(column)] = cell
+    rows[3] = ",".join(cells)
+    path = _write(tmp_path / "bad.csv", ",".join(HEADER) + ",note", [r + ",x" for r in rows])
+    with pytest.raises(ValueError, match=rf"bad\.csv: line 5, column '{column}': '{cell}' is not a number$"):
+        read_columns(path, COLUMNS)
+
+
+# --- sample times over a day ----------------------------------------------------------------------
+
+
+def test_sample_time_over_a_day_is_refused(tmp_path):
+    no_t = _write(
+        tmp_path / "no_t.csv", ",".join(COLUMNS), [",".join(repr(float(v)) for v in r) for r in _good()]
+    )
+    assert read_columns(no_t, COLUMNS, dt=86_400.0)[1] == 86_400.0
+    with pytest.raises(ValueError, match=r"no_t\.csv: sample time 1e\+300 s is over a day \(86400 s\)"):
+        read_columns(no_t, COLUMNS, dt=1e300)
+    t = 1e6 * np.arange(SAMPLES)
+    slow = _write(
+        tmp_path / "slow.csv",
+        ",".join(HEADER),
+        [",".join(repr(float(v)) for v in r) for r in np.c_[t, _good()]],
+    )
+    with pytest.raises(ValueError, match=r"slow\.csv: sample time 1e\+06 s is over a day"):
+        read_columns(slow, COLUMNS)
+
+
+# --- files that are not regular files, or too large -----------------------------------------------
+
+
+def _cli(argv: list[str], cwd) -> subprocess.CompletedProcess:
+    """The console command in a child, so that a hang or a runaway read (the failures these tests
+    catch) ends in a timeout or a MemoryError instead of taking the test run with it."""
+
+    def bounded_memory():  # pragma: no cover - runs in the child
+        import resource
+
+        resource.setrlimit(resource.RLIMIT_AS, (4 << 30, 4 << 30))
+
+    try:
+        return subprocess.run(
+            [sys.executable, "-m", "ssme_envs.cli", *argv], capture_output=True, text=True, check=False,
+            cwd=cwd, timeout=60, preexec_fn=bounded_memory, env={**os.environ, "OMP_NUM_THREADS": "1"},
+        )  # fmt: skip
+    except subprocess.TimeoutExpired:
+        pytest.fail(f"ssme-envs {' '.join(argv)} did not end within 60 s")
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo") or sys.platform == "win32", reason="POSIX special files")
+@pytest.mark.parametrize(
+    ("special", "kind"),
+    [("fifo", "a FIFO"), ("dev-zero", "a character device"), ("link-to-dev-zero", "a character device")],
+)
+def test_cli_refuses_special_files_as_records(tmp_path, model_path, special, kind):
+    """A FIFO named like a record hung the reader; /dev/zero was read for gigabytes, then reported
+    as out of memory. Both are refused up front, symlinks followed."""
+    if special == "fifo":
+        data = tmp_path / "x.csv"
+        os.mkfifo(data)
+    elif special == "dev-zero":
+        data = Path("/dev/zero")
+    else:
+        data = tmp_path / "zero.csv"
+        data.symlink_to("/dev/zero")
+    if not os.path.exists("/dev/zero"):
+        pytest.skip("no /dev/zero")
+    argv = ["validate", "engine", "--model", str(model_path), "--data", str(data), "--out", "v"]
+    proc = _cli(argv, tmp_path)
+    _one_error_line(
+        proc.returncode, proc.stderr, rf"{re.escape(str(data))}: cannot read: not a regular file \({kind}\)$"
+    )
+    assert not (tmp_path / "v").exists()
+
+
+def test_record_over_the_size_limit_is_refused_unread(tmp_path):
+    path = tmp_path / "huge.csv"
+    with path.open("wb") as fh:  # sparse: no disk or memory is spent on it unless it is read
+        fh.truncate(MAX_CSV_BYTES + 1)
+    with pytest.raises(ValueError, match=r"huge\.csv: larger than 1 GiB, the most a record may have$"):
+        read_columns(path, COLUMNS)
+
+
+def test_read_text_bounds_what_it_reads(tmp_path):
+    path = tmp_path / "r.csv"
+    path.write_bytes(b"\xef\xbb\xbft,a\n0,1\n")
+    assert read_text(path) == "t,a\n0,1\n"
+    assert read_text(path, max_bytes=11) == "t,a\n0,1\n"
+    with pytest.raises(ValueError, match="larger than"):
+        read_text(path, max_bytes=10)

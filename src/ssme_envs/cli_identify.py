@@ -41,6 +41,17 @@ def noting_replacement(out: Path) -> Iterator[None]:
         print(f"replaced the earlier run in {out}", file=sys.stderr)
 
 
+def check_dt_option(value: float | None) -> None:
+    """``--dt``: a positive number of seconds, at most a day (:data:`MAX_DT`)."""
+    from ssme_envs.identification.records import MAX_DT
+
+    check_finite("--dt", value, positive=True)
+    if value is not None and value > MAX_DT:
+        raise ValueError(
+            f"--dt must be at most {MAX_DT:g} s (a day): a slower record holds no dynamics, got {value:g}"
+        )
+
+
 def _needs_data(args: argparse.Namespace, flags: tuple[str, ...], embedded: str) -> None:
     for flag in flags:
         if getattr(args, flag) is not None:
@@ -52,7 +63,7 @@ def identify_engine(args: argparse.Namespace) -> int:
     from ssme_envs import pipelines
 
     check_finite("--rank-tol", args.rank_tol)
-    check_finite("--dt", args.dt, positive=True)
+    check_dt_option(args.dt)
     check_seed(args.seed)
     options: dict[str, Any] = {
         "method": args.method,
@@ -102,7 +113,7 @@ def identify_nozzle(args: argparse.Namespace) -> int:
 
     check_workers(args.workers)
     check_finite("--normalization-a", args.normalization_a, positive=True)
-    check_finite("--dt", args.dt, positive=True)
+    check_dt_option(args.dt)
     check_seed(args.seed)
     if args.data is None:
         _needs_data(args, ("validate", "dt"), "bench test")
@@ -131,7 +142,7 @@ def validate_engine(args: argparse.Namespace) -> int:
     from ssme_envs import pipelines
     from ssme_envs.identification.records import record_labels
 
-    check_finite("--dt", args.dt, positive=True)
+    check_dt_option(args.dt)
     with noting_replacement(args.out):
         validation = pipelines.validate_engine(args.out, args.model, args.data, args.dt)
     for path, label in zip(args.data, record_labels(args.data), strict=True):
@@ -142,4 +153,12 @@ def validate_engine(args: argparse.Namespace) -> int:
     return 0
 
 
-__all__ = ["identify_engine", "identify_nozzle", "indices", "names", "noting_replacement", "validate_engine"]
+__all__ = [
+    "check_dt_option",
+    "identify_engine",
+    "identify_nozzle",
+    "indices",
+    "names",
+    "noting_replacement",
+    "validate_engine",
+]

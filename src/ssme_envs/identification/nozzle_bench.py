@@ -12,7 +12,7 @@ import numpy as np
 import scipy.signal
 
 from ssme_envs.identification.bouc_wen import check_torque_record
-from ssme_envs.identification.records import read_columns, write_columns
+from ssme_envs.identification.records import check_magnitudes, read_columns, write_columns
 from ssme_envs.identification.subspace import dsr_e, second_order_parameters
 from ssme_envs.models.nozzle import (
     BENCH_RATE_HZ,
@@ -30,6 +30,10 @@ BENCH_SAMPLES = 7476  # the paper's N at Ts = 0.008 s (59.8 s)
 DECIMATION = round(BENCH_RATE_HZ * NOZZLE_DT)  # 20
 SENSOR_NOISE = 1e-4  # rad, std of the angle sensor at 2.5 kHz (an assumption: 0.006 deg)
 RANGE_DEG = 3.0
+# Angles in a record read from CSV stay within a quarter turn: a nozzle deflects a few degrees (the
+# paper's +-3, the SSME gimbal's +-10.5), so an angle past 90 deg is a glitch or not in rad, and
+# simulating the joint out there needs RK4 substeps without bound (1e5 rad asked for 9e5 a sample).
+MAX_ANGLE = np.pi / 2
 
 
 @dataclass
@@ -182,12 +186,31 @@ def validation_experiment(params: NozzleParameters, seed: int = DEFAULT_SEED + 1
 def read_nozzle_record(
     path: str | Path, input_name: str = "tau", output_name: str = "beta", dt: float | None = None
 ) -> NozzleRecord:
-    """A torque -> angle record from CSV, checked as the fit and the validation need it."""
+    """A torque -> angle record from CSV, checked as the fit and the validation need it.
+
+    Beyond :func:`check_torque_record`: values whose squares overflow float64
+    (:func:`check_magnitudes`) and angles beyond ``MAX_ANGLE`` rad are refused, naming the column.
+
+    Raises
+    ------
+    ValueError
+        Naming the file and the problem.
+    """
     data, dt = read_columns(path, [input_name, output_name], dt)
+    check_magnitudes(data[:, :1], [input_name], "input", path)
+    check_magnitudes(data[:, 1:], [output_name], "output", path)
     try:
         check_torque_record(data[:, 0], data[:, 1], names=(input_name, output_name))
     except ValueError as exc:
         raise ValueError(f"{path}: {exc}") from None
+    far = np.abs(data[:, 1]) > MAX_ANGLE
+    if far.any():
+        k = int(np.argmax(far))
+        raise ValueError(
+            f"{path}: output '{output_name}' reaches {data[k, 1]:.4g} at sample {k}, beyond "
+            f"+-{MAX_ANGLE:.4g} rad ({np.degrees(MAX_ANGLE):g} deg) where no nozzle deflects: a glitch, "
+            "or an angle not in rad?"
+        )
     return NozzleRecord(data[:, 0], data[:, 1], dt, input_name, output_name)
 
 

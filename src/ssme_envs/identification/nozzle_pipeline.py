@@ -47,8 +47,10 @@ from ssme_envs.identification.nozzle_uncertainty import (
 )
 from ssme_envs.identification.subspace import InnovationsModel, SubspaceResult, dsr_e, second_order_parameters
 from ssme_envs.models.nozzle import (
+    MAX_SUBSTEPS,
     NozzleModel,
     NozzleParameters,
+    accuracy_rate,
     published_nozzle,
     recommended_substeps,
     simulate_nozzle,
@@ -187,9 +189,23 @@ def identify_nozzle(
 
 
 def simulate_joint(joint: NozzleParameters, record: NozzleRecord) -> np.ndarray:
-    """The joint's angle under the record's torque, with the RK4 step its motion needs."""
+    """The joint's angle under the record's torque, with the RK4 step its motion needs.
+
+    Raises
+    ------
+    ValueError
+        When the record's largest angle asks for more than ``MAX_SUBSTEPS`` RK4 substeps per
+        sample (the hysteresis rate grows with the amplitude; 1e5 rad asked for 9e5 a sample).
+    """
     amplitude = max(float(np.max(np.abs(record.beta))), 1e-12)
     substeps = recommended_substeps(joint, record.dt, amplitude)
+    if substeps > MAX_SUBSTEPS:
+        rate = accuracy_rate(joint, amplitude)
+        raise ValueError(
+            f"simulating the joint over the record's angles up to {amplitude:.4g} rad needs {substeps} RK4 "
+            f"substeps per {record.dt:g} s sample, more than {MAX_SUBSTEPS}: its {rate.name} is "
+            f"{rate.rate:.4g} 1/s ({rate.detail})"
+        )
     return simulate_nozzle(joint, record.tau, record.dt, substeps=substeps, torque_limit=np.inf)
 
 

@@ -8,26 +8,67 @@ one, so that a controller designed on any of them reads the same four matrices.
 
 from __future__ import annotations
 
+import math
 import numbers
+import reprlib
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
+_SHORT = reprlib.Repr()  # bounded in depth and length: a file's value may be a deep or long list
+_SHORT.maxlevel, _SHORT.maxstring, _SHORT.maxother, _SHORT.maxlong = 3, 60, 60, 60
+
+
+def describe(value: Any) -> str:
+    """``value`` for an error message, kept short: a long integer by its size, others cut."""
+    if isinstance(value, int) and not isinstance(value, bool) and abs(value) >= 10**20:
+        # by bit length: str() of an integer past 4300 digits raises
+        return f"an integer of about {int(value.bit_length() * math.log10(2)) + 1} digits"
+    return _SHORT.repr(value)
+
+
+def finite_float(value: Any, name: str) -> float:
+    """``value`` as a float, or ValueError naming ``name`` unless it is a finite real number.
+
+    Booleans are refused (JSON's ``true`` is no number), and so are integers beyond a float's
+    range, which JSON files can hold (``1e400`` reads as inf, ``1`` and 400 zeros as an int).
+    """
+    if isinstance(value, numbers.Real) and not isinstance(value, bool):
+        try:
+            result = float(value)
+        except OverflowError:
+            result = math.inf
+        if math.isfinite(result):
+            return result
+    raise ValueError(f"{name} must be a finite number, got {describe(value)}")
+
 
 def check_dt(dt: Any) -> float:
     """A sample time as a float, or ValueError unless it is a positive finite number of seconds."""
-    if not (isinstance(dt, numbers.Real) and not isinstance(dt, bool) and np.isfinite(dt) and dt > 0):
-        raise ValueError(f"dt must be a positive number of seconds, got {dt!r}")
-    return float(dt)
+    try:
+        value = finite_float(dt, "dt")
+    except ValueError:
+        value = math.nan
+    if not value > 0:
+        raise ValueError(f"dt must be a positive number of seconds, got {describe(dt)}")
+    return value
+
+
+def as_floats(value: Any, name: str, expected: str) -> np.ndarray:
+    """``value`` as a float array; ValueError saying ``name`` must be ``expected`` when it holds
+    anything but numbers (an object, text, an integer too large for a float)."""
+    try:
+        return np.asarray(value, dtype=float)
+    except OverflowError:
+        raise ValueError(f"{name} must be {expected}: it holds an integer too large for a float") from None
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name} must be {expected}: {exc}") from None
 
 
 def as_matrix(value: Any, name: str, shape: tuple[int | None, int | None]) -> np.ndarray:
     """``value`` as a finite float matrix of ``shape`` (None: any size); ValueError naming it."""
-    try:
-        arr = np.asarray(value, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{name} must be a numeric matrix (list of rows): {exc}") from None
+    arr = as_floats(value, name, "a numeric matrix (list of rows)")
     if arr.ndim != 2:
         raise ValueError(f"{name} must be a matrix (list of rows), got {arr.ndim} dimension(s)")
     for axis, want in enumerate(shape):
@@ -119,4 +160,13 @@ class StateSpace(Dimensions):
         object.__setattr__(self, "dt", check_dt(self.dt))
 
 
-__all__ = ["Dimensions", "PlantMatrices", "StateSpace", "as_matrix", "check_dt"]
+__all__ = [
+    "Dimensions",
+    "PlantMatrices",
+    "StateSpace",
+    "as_floats",
+    "as_matrix",
+    "check_dt",
+    "describe",
+    "finite_float",
+]

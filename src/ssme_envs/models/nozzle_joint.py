@@ -5,12 +5,14 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
 from functools import cache
 from importlib import resources
 from typing import Any, NamedTuple
 
 import numpy as np
+
+from ssme_envs.models.linear import finite_float
 
 NOZZLE_DT = 0.008  # s, the paper's decimated sample time
 BENCH_RATE_HZ = 2500.0  # the bench acquisition rate
@@ -44,9 +46,8 @@ class NozzleParameters:
     n: float = 1.0
 
     def __post_init__(self) -> None:
-        for name, value in asdict(self).items():
-            if isinstance(value, bool) or not isinstance(value, int | float) or not np.isfinite(value):
-                raise ValueError(f"nozzle parameter {name} must be a finite number, got {value!r}")
+        for field in fields(self):  # not asdict: it would copy (and recurse into) a nested list
+            finite_float(getattr(self, field.name), f"nozzle parameter {field.name}")
         for name in ("J", "k", "A", "n"):
             if getattr(self, name) <= 0:
                 raise ValueError(f"nozzle parameter {name} must be positive, got {getattr(self, name)}")

@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 
+from ssme_envs.models.linear import describe, finite_float
 from ssme_envs.models.nozzle_joint import NozzleParameters
 from ssme_envs.models.statespace import as_matrix, dumps_compact, read_json
 from ssme_envs.models.uncertainty import ParameterUncertainty
@@ -24,12 +25,15 @@ BOUC_WEN_UNCERTAIN = ("J", "b", "k_el", "k_hys", "beta_n", "gamma_n", "n")
 
 def _read_uncertainty(block: Any, known: tuple[str, ...], where: str) -> ParameterUncertainty:
     """An ``uncertainty`` block of model.json (see :class:`NozzleModel`); ValueError naming the flaw."""
-    result = ParameterUncertainty.from_dict(block, known, f"{where}.uncertainty")
+    try:
+        result = ParameterUncertainty.from_dict(block, known, f"{where}.uncertainty")
+    except OverflowError:  # its checks convert with float(), which an integer past 1e308 overflows
+        raise ValueError(f"{where}.uncertainty holds an integer too large for a float") from None
     listed = block.get("standard_errors")
     if listed is not None:
         try:
             values = np.array(listed, dtype=float)
-        except (TypeError, ValueError):
+        except (TypeError, ValueError, OverflowError):
             raise ValueError(f"{where}.uncertainty.standard_errors must be a list of numbers") from None
         expected = result.standard_errors
         if values.shape != expected.shape or not np.allclose(values, expected, rtol=1e-9, atol=0.0):
@@ -107,13 +111,11 @@ class NozzleModel:
         lin["D"] = as_matrix(lin["D"], "linear.D", (1, 1))
         lin["K"] = as_matrix(lin["K"], "linear.K", (n, 1))
         for key in ("dt", "J", "b", "k"):
-            value = lin[key]
-            if isinstance(value, bool) or not isinstance(value, int | float) or not np.isfinite(value):
-                raise ValueError(f"linear.{key} must be a finite number, got {value!r}")
+            value = finite_float(lin[key], f"linear.{key}")
             if value < 0 or (key != "b" and value == 0):
                 kind = ">= 0 (damping)" if key == "b" else "positive"
-                raise ValueError(f"linear.{key} must be {kind}, got {value!r}")
-            lin[key] = float(value)
+                raise ValueError(f"linear.{key} must be {kind}, got {describe(lin[key])}")
+            lin[key] = value
         self.linear = lin
 
     @property
@@ -151,9 +153,14 @@ class NozzleModel:
         if not isinstance(data, dict):
             raise ValueError(f"{source}: expected a JSON object, got {type(data).__name__}")
         if data.get("schema") != NOZZLE_MODEL_SCHEMA:
-            raise ValueError(f"{source}: schema is {data.get('schema')!r}, expected {NOZZLE_MODEL_SCHEMA!r}")
-        if data.get("schema_version") not in _READABLE_VERSIONS:
-            raise ValueError(f"{source}: unsupported schema_version {data.get('schema_version')!r}")
+            schema = describe(data.get("schema"))
+            raise ValueError(f"{source}: schema is {schema}, expected {NOZZLE_MODEL_SCHEMA!r}")
+        version = data.get("schema_version")
+        if isinstance(version, bool) or version not in _READABLE_VERSIONS:
+            raise ValueError(
+                f"{source}: unsupported schema_version {describe(version)} "
+                f"(expected one of {list(_READABLE_VERSIONS)})"
+            )
         if not isinstance(data.get("linear"), dict):
             raise ValueError(f"{source}: 'linear' must be an object with A, B, C, D, K, dt, J, b, k")
         linear = dict(data["linear"])
@@ -196,6 +203,8 @@ class NozzleModel:
             )
         except ValueError as exc:
             raise ValueError(f"{source}: {exc}") from None
+        except (TypeError, OverflowError) as exc:  # a value of a type no check foresaw
+            raise ValueError(f"{source}: not a nozzle model ({type(exc).__name__}: {exc})") from None
 
     def save(self, path: str | Path) -> None:
         from ssme_envs.outputs import write_text  # atomic: a reader never sees half a model

@@ -35,12 +35,13 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from ssme_envs.models.linear import Dimensions, StateSpace, as_matrix, check_dt
+from ssme_envs.models.linear import Dimensions, StateSpace, as_floats, as_matrix, check_dt, describe
 from ssme_envs.models.statespace_json import dumps_compact, read_json
 from ssme_envs.models.uncertainty import ParameterUncertainty
 
@@ -87,9 +88,18 @@ class AlphaStructure:
     def n_outputs(self) -> int:
         return len(self.indices)
 
+    @cached_property
+    def _rows(self) -> dict[tuple[int, int], int]:
+        # a search of ``states`` per call made the loops over all states quadratic
+        return {state: row for row, state in enumerate(self.states)}
+
     def position(self, output: int, depth: int) -> int:
         """Row of state ``(output, depth)``."""
-        return self.states.index((output, depth))
+        try:
+            return self._rows[(output, depth)]
+        except KeyError:
+            where = f"(output {output}, depth {depth})"
+            raise ValueError(f"no state {where} for indices {list(self.indices)}") from None
 
     def shift_matrix(self) -> np.ndarray:
         """The nilpotent structure matrix A_o."""
@@ -189,13 +199,14 @@ class AlphaCanonicalModel(Dimensions):
         if len(indices) != p or sum(int(v) for v in indices) != n:  # before the structure is built:
             # a corrupt file's 1e9 would make a tuple of 1e9 states
             raise ValueError(
-                f"observability_indices {list(indices)} need {len(indices)} outputs and "
-                f"{sum(int(v) for v in indices)} states, the matrices have {p} and {n}"
+                f"observability_indices {describe(list(indices))} need {len(indices)} outputs and "
+                f"{describe(sum(int(v) for v in indices))} states, the matrices have {p} and {n}"
             )
         self.observability_indices = AlphaStructure.from_indices(indices).indices
-        self.lam = np.asarray(self.lam, dtype=float).reshape(-1)
-        if self.lam.shape != (m,) or not np.all(np.isfinite(self.lam)):
-            raise ValueError(f"lambda must hold {m} finite gains, got {self.lam.tolist()}")
+        lam = as_floats(self.lam, "lambda", f"a list of {m} finite gains")
+        if lam.size != m or not np.all(np.isfinite(lam)):
+            raise ValueError(f"lambda must hold {m} finite gains, got {describe(self.lam)}")
+        self.lam = lam.reshape(-1)
         self.input_names = tuple(str(v) for v in self.input_names)
         self.output_names = tuple(str(v) for v in self.output_names)
         if len(self.input_names) != m or len(self.output_names) != p:
@@ -304,17 +315,18 @@ class AlphaCanonicalModel(Dimensions):
         """Largest violation of eqs 5-8 with ``C = H [0 I]`` (0 for a model exactly in the form)."""
         s = self.structure
         a_o = s.shift_matrix()
+        k_gain = self.K  # a copy or a triangular solve: once, not per entry
         h = np.eye(s.n_outputs)
         for i in range(s.n_outputs):
             for j in s.coupled_outputs(i):
                 h[i, j] = self.C[i, s.n_states - s.n_outputs + j]
-        errs = [np.max(np.abs(self.C - s.output_matrix(h))), np.max(np.abs(self.A - a_o - self.K @ self.C))]
+        errs = [np.max(np.abs(self.C - s.output_matrix(h))), np.max(np.abs(self.A - a_o - k_gain @ self.C))]
         for i in range(s.n_outputs):
             free = set(s.free_output_lags(i))
             for d in range(s.indices[i]):
-                for j in range(s.n_outputs):
-                    if (j, d) not in free:
-                        errs.append(abs(self.K[s.position(i, d), j]))
+                fixed = [j for j in range(s.n_outputs) if (j, d) not in free]
+                if fixed:
+                    errs.append(np.max(np.abs(k_gain[s.position(i, d), fixed])))
         return float(max(errs))
 
     def state_space(self) -> StateSpace:

@@ -8,11 +8,14 @@
 from __future__ import annotations
 
 import json
+import os
+import stat
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ssme_envs.models.linear import describe
 from ssme_envs.models.uncertainty import ParameterUncertainty
 
 if TYPE_CHECKING:
@@ -22,6 +25,11 @@ ENGINE_MODEL_SCHEMA = "ssme-envs/engine-model"
 # Version 2 added C = H [0 I] and the optional ``uncertainty`` block; version 1 files still load.
 ENGINE_MODEL_SCHEMA_VERSION = 2
 SUPPORTED_ENGINE_SCHEMA_VERSIONS = (1, 2)
+# Identified engine models have tens of states (indices up to 6 per output by default); the bound
+# keeps a corrupt or hostile file from costing minutes and gigabytes in the checks below.
+MAX_MODEL_STATES = 512
+# Model files are kB to a few MB; the bound keeps a wrong path (a disk image, a log) from being read.
+MAX_JSON_BYTES = 64 * 1024 * 1024
 
 
 def engine_model_to_dict(model: AlphaCanonicalModel) -> dict[str, Any]:
@@ -51,10 +59,13 @@ def engine_model_from_dict(
         raise ValueError(f"{source}: expected a JSON object, got {type(data).__name__}")
     schema = data.get("schema", ENGINE_MODEL_SCHEMA)
     if schema != ENGINE_MODEL_SCHEMA:
-        raise ValueError(f"{source}: schema is {schema!r}, expected {ENGINE_MODEL_SCHEMA!r}")
+        raise ValueError(f"{source}: schema is {describe(schema)}, expected {ENGINE_MODEL_SCHEMA!r}")
     version = data.get("schema_version", ENGINE_MODEL_SCHEMA_VERSION)
-    if version not in SUPPORTED_ENGINE_SCHEMA_VERSIONS:
-        raise ValueError(f"{source}: unsupported schema_version {version!r}")
+    if isinstance(version, bool) or version not in SUPPORTED_ENGINE_SCHEMA_VERSIONS:
+        raise ValueError(
+            f"{source}: unsupported schema_version {describe(version)} "
+            f"(expected one of {list(SUPPORTED_ENGINE_SCHEMA_VERSIONS)})"
+        )
     missing = [k for k in ("dt", "A", "B", "C", "observability_indices", "lambda") if k not in data]
     if missing:
         raise ValueError(f"{source}: missing key(s) {', '.join(missing)}")
@@ -64,8 +75,15 @@ def engine_model_from_dict(
     except (TypeError, IndexError, KeyError):
         raise ValueError(f"{source}: B and C must be non-empty lists of rows") from None
     indices = data["observability_indices"]
-    if not isinstance(indices, list) or not all(isinstance(v, int) for v in indices):
+    integers = isinstance(indices, list) and all(type(v) is int for v in indices)  # JSON true is no index
+    if not integers:
         raise ValueError(f"{source}: observability_indices must be a list of integers")
+    # before any array is built: the checks below cost n^2 p, the model's use more. The indices
+    # must sum to n, checked before their structure is built.
+    if isinstance(data["A"], list) and len(data["A"]) > MAX_MODEL_STATES:
+        raise ValueError(
+            f"{source}: A has {len(data['A'])} rows (states); a model file holds at most {MAX_MODEL_STATES}"
+        )
     names = {}
     for key, count, prefix in (("input_names", m, "u"), ("output_names", p, "y")):
         value = data.get(key, [f"{prefix}{i}" for i in range(count)])
@@ -87,17 +105,22 @@ def engine_model_from_dict(
             **names,
         )
     except ValueError as exc:
-        raise ValueError(f"{source}: {exc}") from None
+        raise ValueError(f"{source}: not an engine model: {exc}") from None
+    except (TypeError, OverflowError) as exc:  # a value of a type no check above foresaw
+        raise ValueError(f"{source}: not an engine model ({type(exc).__name__}: {exc})") from None
     residual = model.alpha_canonical_residual()
-    if residual > 1e-9 * max(1.0, float(np.max(np.abs(model.A)))):
+    if not residual <= 1e-9 * max(1.0, float(np.max(np.abs(model.A)))):  # NaN (an overflowing K) fails
         raise ValueError(
             f"{source}: (A, C) is not in alpha-canonical form for observability indices "
             f"{list(model.observability_indices)} (largest violation of eqs 5-8: {residual:.3g})"
         )
     if data.get("uncertainty") is not None:
-        model.uncertainty = ParameterUncertainty.from_dict(
-            data["uncertainty"], model.parameter_names(), source
-        )
+        try:
+            model.uncertainty = ParameterUncertainty.from_dict(
+                data["uncertainty"], model.parameter_names(), source
+            )
+        except OverflowError:  # its checks convert with float(), which an integer past 1e308 overflows
+            raise ValueError(f"{source}: uncertainty holds an integer too large for a float") from None
     return model
 
 
@@ -108,15 +131,51 @@ def save_engine_model(model: AlphaCanonicalModel, path: str | Path) -> None:
     write_text(path, dumps_compact(engine_model_to_dict(model)) + "\n")
 
 
+def _file_kind(mode: int) -> str:
+    kinds = (
+        (stat.S_ISDIR, "a directory"),
+        (stat.S_ISFIFO, "a FIFO (named pipe)"),
+        (stat.S_ISCHR, "a character device"),
+        (stat.S_ISBLK, "a block device"),
+        (stat.S_ISSOCK, "a socket"),
+    )
+    return next((name for test, name in kinds if test(mode)), "not a regular file")
+
+
 def read_json(path: str | Path) -> Any:
-    """Parse a JSON file; a missing file or bad JSON is a ValueError naming the file."""
+    """Parse a JSON file; a missing, special or oversized file or bad JSON is a ValueError naming it."""
     path = Path(path)
     try:
-        return json.loads(path.read_text())
+        # non-blocking: opening a FIFO waits for a writer otherwise; regular files read as ever
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
     except FileNotFoundError:
         raise ValueError(f"{path}: no such file") from None
-    except (OSError, json.JSONDecodeError, UnicodeDecodeError) as exc:
+    except OSError as exc:
+        raise ValueError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    try:
+        info = os.fstat(fd)  # of the opened file: symlinks followed, no race with a swap
+        if not stat.S_ISREG(info.st_mode):
+            raise ValueError(f"{path}: not valid JSON: it is {_file_kind(info.st_mode)}, not a regular file")
+        raw = b""
+        if info.st_size <= MAX_JSON_BYTES:
+            with open(fd, "rb", closefd=False) as file:
+                raw = file.read(MAX_JSON_BYTES + 1)  # bounded again: the file may grow meanwhile
+    except OSError as exc:
+        raise ValueError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    finally:
+        os.close(fd)
+    if info.st_size > MAX_JSON_BYTES or len(raw) > MAX_JSON_BYTES:
+        raise ValueError(f"{path}: larger than {MAX_JSON_BYTES // 2**20} MiB, too large for a model file")
+    try:
+        return json.loads(raw.decode("utf-8"))
+    except RecursionError:
+        raise ValueError(f"{path}: nested too deeply to read as JSON") from None
+    except json.JSONDecodeError as exc:
         raise ValueError(f"{path}: not valid JSON ({exc})") from None
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"{path}: not valid JSON, not UTF-8 text ({exc})") from None
+    except ValueError as exc:  # Python's bound on the digits of an integer, the one other ValueError
+        raise ValueError(f"{path}: a number in it is too long to read ({str(exc).split(';')[0]})") from None
 
 
 def dumps_compact(obj: Any) -> str:
@@ -158,6 +217,8 @@ def dumps_compact(obj: Any) -> str:
 __all__ = [
     "ENGINE_MODEL_SCHEMA",
     "ENGINE_MODEL_SCHEMA_VERSION",
+    "MAX_JSON_BYTES",
+    "MAX_MODEL_STATES",
     "SUPPORTED_ENGINE_SCHEMA_VERSIONS",
     "dumps_compact",
     "engine_model_from_dict",
