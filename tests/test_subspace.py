@@ -8,6 +8,8 @@ import numpy as np
 import pytest
 import scipy.signal
 from conftest import dlsim, markov
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy.optimize import linear_sum_assignment
 
 from ssme_envs.identification.subspace import (
@@ -294,3 +296,28 @@ def test_model_validation():
         model.simulate(np.zeros((10, 3)))
     with pytest.raises(ValueError, match="y has shape"):
         model.simulate(np.zeros((10, 2)), np.zeros((9, 2)))
+
+
+@settings(max_examples=12, deadline=None)
+@given(exponent=st.floats(-10.0, 30.0))
+def test_the_input_scale_only_scales_the_input_gains(exponent):
+    """An input in other units (x 1e20 once read as 'the inputs do not determine B and D') gives
+    the same poles and the same transfer once the scale is divided out. The record is a
+    second-order filter run by scipy.signal.lfilter, with a little output noise. Tolerances:
+    beyond about 1e12 between the channels' scales the projections lose digits (poles off by
+    about 1e-5, within 1e-6 below)."""
+    rng = np.random.default_rng(5)
+    num, den, _ = scipy.signal.cont2discrete(([1.0], [1.0, 8.0, 400.0]), 0.01)
+    u = rng.standard_normal(2000)
+    y = scipy.signal.lfilter(np.squeeze(num), den, u) + 1e-4 * rng.standard_normal(2000)
+    scale = 10.0**exponent
+    base = dsr_e(u[:, None], y[:, None], 0.01, order=2).model
+    scaled = dsr_e(scale * u[:, None], y[:, None], 0.01, order=2).model
+    np.testing.assert_allclose(
+        np.sort_complex(np.linalg.eigvals(scaled.A)), np.sort_complex(np.linalg.eigvals(base.A)), atol=1e-4
+    )
+    ours = scale * markov(scaled.A, scaled.B, scaled.C, 10)
+    theirs = markov(base.A, base.B, base.C, 10)
+    size = np.abs(theirs).max()  # D is zero up to the noise: compared on the transfer's scale
+    np.testing.assert_allclose(ours, theirs, rtol=0, atol=1e-3 * size)
+    np.testing.assert_allclose(scale * scaled.D, base.D, rtol=0, atol=1e-3 * size)

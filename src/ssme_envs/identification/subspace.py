@@ -213,7 +213,12 @@ def _input_matrices(
             f"the identified A is unstable (spectral radius {np.max(np.abs(np.linalg.eigvals(a))):.4g}) "
             "and its unit responses overflow over the record: try another order or horizons"
         )
-    theta, _, rank, _ = np.linalg.lstsq(phi, target.reshape(-1), rcond=None)
+    # columns to unit norm: the rank test (relative to the largest singular value) then does not
+    # depend on the units of the inputs against those of the initial state's columns
+    norms = np.linalg.norm(phi, axis=0)
+    norms[norms == 0.0] = 1.0
+    theta, _, rank, _ = np.linalg.lstsq(phi / norms, target.reshape(-1), rcond=None)
+    theta = theta / norms
     if rank < phi.shape[1]:
         raise ValueError(
             f"the inputs do not determine B and D (regression rank {rank} of {phi.shape[1]}): "
