@@ -262,13 +262,14 @@ def test_epoch_style_time_column_is_uniform(tmp_path):
         read_columns(irregular, COLUMNS)
 
 
+def _timed(path, t):
+    """A record of the good data with time column ``t``, every value written exactly."""
+    return _write(path, ",".join(HEADER), [",".join(repr(float(v)) for v in r) for r in np.c_[t, _good()]])
+
+
 def test_time_stamps_too_coarse_for_their_steps_are_refused(tmp_path):
     t = 1e15 + 0.25 * np.arange(SAMPLES)  # floats near 1e15 are 0.125 s apart
-    path = _write(
-        tmp_path / "coarse.csv",
-        ",".join(HEADER),
-        [",".join(repr(float(v)) for v in r) for r in np.c_[t, _good()]],
-    )
+    path = _timed(tmp_path / "coarse.csv", t)
     with pytest.raises(ValueError, match=r"coarse\.csv: column 't' cannot resolve its steps of 0\.25 s"):
         read_columns(path, COLUMNS)
 
@@ -312,12 +313,7 @@ def test_sample_time_over_a_day_is_refused(tmp_path):
     assert read_columns(no_t, COLUMNS, dt=86_400.0)[1] == 86_400.0
     with pytest.raises(ValueError, match=r"no_t\.csv: sample time 1e\+300 s is over a day \(86400 s\)"):
         read_columns(no_t, COLUMNS, dt=1e300)
-    t = 1e6 * np.arange(SAMPLES)
-    slow = _write(
-        tmp_path / "slow.csv",
-        ",".join(HEADER),
-        [",".join(repr(float(v)) for v in r) for r in np.c_[t, _good()]],
-    )
+    slow = _timed(tmp_path / "slow.csv", 1e6 * np.arange(SAMPLES))
     with pytest.raises(ValueError, match=r"slow\.csv: sample time 1e\+06 s is over a day"):
         read_columns(slow, COLUMNS)
 
