@@ -4,14 +4,13 @@ from __future__ import annotations
 
 import csv
 import io
-import os
-import stat
 from collections import Counter
 from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
+from ssme_envs.input_files import FileTooLarge, NotRegularFile, read_bounded
 from ssme_envs.models.statespace import check_dt
 
 # Generous for any test record (a million rows of ten columns is about 200 MB); it stops a file that
@@ -25,19 +24,6 @@ MAX_DT = 86_400.0
 MIN_STEP_RESOLUTIONS = 100
 
 
-def _file_kind(mode: int) -> str:
-    for test, kind in (
-        (stat.S_ISDIR, "a directory"),
-        (stat.S_ISFIFO, "a FIFO"),
-        (stat.S_ISCHR, "a character device"),
-        (stat.S_ISBLK, "a block device"),
-        (stat.S_ISSOCK, "a socket"),
-    ):
-        if test(mode):
-            return kind
-    return "a special file"
-
-
 def read_text(path: Path, max_bytes: int = MAX_CSV_BYTES) -> str:
     """The UTF-8 text of a regular file (a byte-order mark at its start skipped).
 
@@ -48,38 +34,17 @@ def read_text(path: Path, max_bytes: int = MAX_CSV_BYTES) -> str:
         blocks its reader, a device such as /dev/zero never ends); a file over ``max_bytes``;
         text that is not UTF-8.
     """
-    # O_NONBLOCK: opening a FIFO would otherwise wait for a writer before fstat could refuse it
-    flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_BINARY", 0)
     try:
-        fd = os.open(path, flags)
+        return read_bounded(path, max_bytes).decode("utf-8-sig")
     except FileNotFoundError:
         raise ValueError(f"{path}: no such file") from None
-    except OSError as exc:
-        raise ValueError(f"{path}: cannot read ({exc})") from None
-    too_big = f"{path}: larger than {max_bytes / 2**30:.3g} GiB, the most a record may have"
-    try:
-        info = os.fstat(fd)
-        if not stat.S_ISREG(info.st_mode):
-            raise ValueError(f"{path}: cannot read: not a regular file ({_file_kind(info.st_mode)})")
-        if info.st_size > max_bytes:
-            raise ValueError(too_big)
-        fh = os.fdopen(fd, "rb")
-    except BaseException:
-        os.close(fd)
-        raise
-    chunks, size = [], 0
-    with fh:
-        try:
-            while chunk := fh.read(1 << 24):  # bounded as it goes: the file may grow after fstat
-                size += len(chunk)
-                if size > max_bytes:
-                    raise ValueError(too_big)
-                chunks.append(chunk)
-        except OSError as exc:
-            raise ValueError(f"{path}: cannot read ({exc})") from None
-    try:
-        return b"".join(chunks).decode("utf-8-sig")
-    except UnicodeDecodeError as exc:
+    except NotRegularFile as exc:
+        raise ValueError(f"{path}: cannot read: not a regular file ({exc.kind})") from None
+    except FileTooLarge:
+        raise ValueError(
+            f"{path}: larger than {max_bytes / 2**30:.3g} GiB, the most a record may have"
+        ) from None
+    except (OSError, UnicodeDecodeError) as exc:
         raise ValueError(f"{path}: cannot read ({exc})") from None
 
 

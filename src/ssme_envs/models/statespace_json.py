@@ -8,13 +8,12 @@
 from __future__ import annotations
 
 import json
-import os
-import stat
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ssme_envs.input_files import FileTooLarge, NotRegularFile, read_bounded
 from ssme_envs.models.linear import describe
 from ssme_envs.models.uncertainty import ParameterUncertainty
 
@@ -131,41 +130,22 @@ def save_engine_model(model: AlphaCanonicalModel, path: str | Path) -> None:
     write_text(path, dumps_compact(engine_model_to_dict(model)) + "\n")
 
 
-def _file_kind(mode: int) -> str:
-    kinds = (
-        (stat.S_ISDIR, "a directory"),
-        (stat.S_ISFIFO, "a FIFO (named pipe)"),
-        (stat.S_ISCHR, "a character device"),
-        (stat.S_ISBLK, "a block device"),
-        (stat.S_ISSOCK, "a socket"),
-    )
-    return next((name for test, name in kinds if test(mode)), "not a regular file")
-
-
 def read_json(path: str | Path) -> Any:
     """Parse a JSON file; a missing, special or oversized file or bad JSON is a ValueError naming it."""
     path = Path(path)
     try:
-        # non-blocking: opening a FIFO waits for a writer otherwise; regular files read as ever
-        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
+        raw = read_bounded(path, MAX_JSON_BYTES)
     except FileNotFoundError:
         raise ValueError(f"{path}: no such file") from None
+    except NotRegularFile as exc:
+        kind = "a FIFO (named pipe)" if exc.kind == "a FIFO" else exc.kind
+        raise ValueError(f"{path}: not valid JSON: it is {kind}, not a regular file") from None
+    except FileTooLarge:
+        raise ValueError(
+            f"{path}: larger than {MAX_JSON_BYTES // 2**20} MiB, too large for a model file"
+        ) from None
     except OSError as exc:
         raise ValueError(f"{path}: cannot read ({exc.strerror or exc})") from None
-    try:
-        info = os.fstat(fd)  # of the opened file: symlinks followed, no race with a swap
-        if not stat.S_ISREG(info.st_mode):
-            raise ValueError(f"{path}: not valid JSON: it is {_file_kind(info.st_mode)}, not a regular file")
-        raw = b""
-        if info.st_size <= MAX_JSON_BYTES:
-            with open(fd, "rb", closefd=False) as file:
-                raw = file.read(MAX_JSON_BYTES + 1)  # bounded again: the file may grow meanwhile
-    except OSError as exc:
-        raise ValueError(f"{path}: cannot read ({exc.strerror or exc})") from None
-    finally:
-        os.close(fd)
-    if info.st_size > MAX_JSON_BYTES or len(raw) > MAX_JSON_BYTES:
-        raise ValueError(f"{path}: larger than {MAX_JSON_BYTES // 2**20} MiB, too large for a model file")
     try:
         return json.loads(raw.decode("utf-8"))
     except RecursionError:
