@@ -150,6 +150,8 @@ class SB3VecEnv(VecEnv):
     def _targets(self, indices: VecEnvIndices) -> list[Any]:
         """The sub-envs of ``indices`` (None: all; an int or ints, negative ones counted from the
         end as in a list), checked."""
+        if indices is None:  # every sub-env: nothing to check
+            return list(self._sub_envs)
         chosen = list(self._get_indices(indices))
         for i in chosen:
             if isinstance(i, bool | np.bool_) or not isinstance(i, int | np.integer):

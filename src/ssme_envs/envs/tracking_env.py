@@ -172,14 +172,13 @@ class TrackingEnv(gym.Env):
         reset, all the rest at once when the episode leaves it: on one env a block costs about
         as much as the whole episode."""
         start, length = len(self._noise), self.task.horizon + 1
-        stop = next_stop(start, length)
+        stop, first = next_stop(start, length), next_stop(0, length)
         if start == 0:
             refs, noise = self.task.episodes(self._uniforms, 0, stop)
         else:
-            if start == next_stop(0, length):  # leaving the first block: the rest, from here
-                self._rest = self.task.episodes(self._uniforms, start, length)
-            offset = length - self._rest[1].shape[1]  # the step the rest begins at
-            refs, noise = (values[:, start - offset : stop - offset] for values in self._rest)
+            if start == first:  # leaving the first block: the rest of the episode, from here
+                self._rest = self.task.episodes(self._uniforms, first, length)
+            refs, noise = (values[:, start - first : stop - first] for values in self._rest)
         self._refs += refs[:, :, 0].T.tolist()
         self._noise += noise[:, :, 0].T.astype(np.float64).tolist()
         return refs, noise
