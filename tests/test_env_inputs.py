@@ -368,6 +368,26 @@ def test_the_packaged_engine_plants_pass_the_gain_check():
             gym.make(TRACKING, plant=plant, power=power).reset(seed=0)
 
 
+def test_the_ssme_models_reach_below_five_under_any_full_valve_travel():
+    """The figure the refusal quotes: for each Table I model and output, the worst +-1 valve
+    sequence (each valve against the sign of its impulse response, through eq 36's gains),
+    simulated by scipy.signal.dlsim, peaks below 5 (normalized) and within the check's bound."""
+    import scipy.signal
+
+    from ssme_envs.models.engine import MAX_PEAK_OUTPUT, POWER_LEVELS, published_model
+
+    steps = 400
+    for power in POWER_LEVELS:
+        model = published_model(power)
+        system = (model.A, model.B, model.C, np.zeros((2, 2)), model.dt)
+        _, impulse = scipy.signal.dimpulse(system, n=steps)  # per input: (steps, outputs)
+        for i in range(2):
+            signs = np.stack([np.sign(impulse[j][::-1, i]) for j in range(2)], axis=1)  # u(k) vs h(N-1-k)
+            u_star = signs + (model.lam - 1.0) * np.abs(signs)
+            _, y, _ = scipy.signal.dlsim(system, u_star)
+            assert 1.0 < abs(y[-1, i]) < 5.0 <= MAX_PEAK_OUTPUT, (power, i)
+
+
 def test_a_plant_of_its_own_is_its_truth_design_and_a_design_at_another_dt_is_refused():
     """An engine plant at dt 0.2 s ran the 0.04 s designs with exit 0."""
     import dataclasses
