@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-import operator
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -19,7 +18,7 @@ from ssme_envs.models.engine import ENGINE_DT, TruthConfig
 from ssme_envs.models.engine_nonlinear import NonlinearEngine
 from ssme_envs.models.engine_step import (
     dynamics_arrays,
-    dynamics_pair_floats,
+    dynamics_pair_offset_floats,
     pair_rows,
     valves_arrays,
     valves_pair_floats,
@@ -90,10 +89,10 @@ class ThrottleTask(EngineTask):
             (slice(end - len(block), end), table.shape[1:])
             for end, block, table in zip(ends, rows, tables, strict=True)
         )
-        # per step: pair_rows of K and B (the float core's), lambda - 1, the state offsets
+        # per step: pair_rows of K and B (the float core's) with each state's offset, lambda - 1
         shift = self.params.shift_source
         per_step = [
-            (pair_rows(shift, k, b), lam, offset)
+            (tuple((*row, o) for row, o in zip(pair_rows(shift, k, b), offset, strict=True)), lam)
             for k, b, lam, offset in zip(*(table.tolist() for table in tables), strict=True)
         ]
         object.__setattr__(self, "schedule", Schedule(per_step, np.ascontiguousarray(np.concatenate(rows))))
@@ -185,8 +184,8 @@ class ThrottleTask(EngineTask):
         """The linked model with the parameters of step t - 1 -> t (the plant core's float or
         array arithmetic, the same operations in the same order)."""
         x, linkage, valve = plant
-        half, stick, shift = self.params.half_backlash, self.params.stiction, self.params.shift_source
         if ops.batched:
+            half, stick, shift = self.params.half_backlash, self.params.stiction, self.params.shift_source
             rows = ops.at(self.schedule, t)
             k, b, lam, offset = (
                 rows[part].reshape(*shape, rows.shape[-1]) for part, shape in self.schedule_parts
@@ -196,11 +195,11 @@ class ThrottleTask(EngineTask):
             x = dynamics_arrays(x, u_star, shift, k, b)
             x += offset  # in place: the same sum, without a third (n, N) array
         else:
-            pairs, (g0, g1), offset = ops.at(self.schedule, t)
+            rows, (g0, g1) = ops.at(self.schedule, t)
+            half, stick = self.rows[3:]
             linkage, (v0, v1) = valves_pair_floats(linkage, valve, *command, half, stick)
             n0, n1 = nominal
-            x = dynamics_pair_floats(x, v0 + g0 * abs(v0 - n0), v1 + g1 * abs(v1 - n1), pairs)
-            x = list(map(operator.add, x, offset))  # x + offset, a third faster than a comprehension
+            x = dynamics_pair_offset_floats(x, v0 + g0 * abs(v0 - n0), v1 + g1 * abs(v1 - n1), rows)
             valve = (v0, v1)
         return EnginePlant(x, linkage, valve), x[-2], x[-1]
 

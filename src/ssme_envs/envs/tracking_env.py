@@ -87,6 +87,7 @@ class TrackingEnv(gym.Env):
         self.action_space = gym.spaces.Box(-1.0, 1.0, (self.task.n_actions,), dtype=np.float32)
         self.observation_space = self.task.observation.space()
         self._low, self._high = self.observation_space.low, self.observation_space.high
+        self._n_obs = len(self._low)
         self._history: list[list[float]] = []
         self._figure = None
         self._t = 0
@@ -149,8 +150,8 @@ class TrackingEnv(gym.Env):
             self._history.append(task.render_row(self._state, obs, ref))
             if self.render_mode == "human":
                 self.render()
-        out = np.array(obs, dtype=np.float32)
-        CLIP_UFUNC(out, self._low, self._high, out=out)  # into the bounds (np.clip, without its wrapper)
+        # into the bounds (np.clip, without its wrapper), from the float32 values
+        out = CLIP_UFUNC(np.fromiter(obs, np.float32, self._n_obs), self._low, self._high)
         info = {}
         if not math.isfinite(reward):  # the state overflowed or went NaN: end the episode (see Episode End)
             penalty = task.nonfinite_reward(t)

@@ -147,6 +147,18 @@ def dynamics_pair_floats(x: list, u0: float, u1: float, rows: tuple) -> list:
     ]
 
 
+def dynamics_pair_offset_floats(x: list, u0: float, u1: float, rows: tuple) -> list:
+    """:func:`dynamics_pair_floats` plus a constant per state, added last (the linked model's
+    operating-point offset): ``rows`` hold ``(source, K_i0, K_i1, B_i0, B_i1, offset_i)``. One
+    pass instead of a second list for the sum; the same operations in the same order."""
+    y0, y1 = x[-2], x[-1]
+    return [
+        (((x[source] + (k0 * y0 + k1 * y1)) if source >= 0 else (k0 * y0 + k1 * y1)) + (b0 * u0 + b1 * u1))
+        + offset
+        for source, k0, k1, b0, b1, offset in rows
+    ]
+
+
 def valves_arrays(linkage: np.ndarray, valve: np.ndarray, command: np.ndarray, half: float, stick: float):
     """Backlash then stiction for N engines' valves, (m, N) arrays. Returns (linkage, valve)."""
     linkage = np.minimum(np.maximum(linkage, command - half), command + half) if half else command
