@@ -7,6 +7,8 @@ import control
 import numpy as np
 import pytest
 import scipy.signal
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from ssme_envs.cli import main
 from ssme_envs.evaluation import LAYOUTS, Rollout, evaluate, metrics, step_metrics
@@ -57,6 +59,53 @@ def test_metrics_by_hand():
     # never in episode 2's 5; FPOV's request of 1.5 was never applied
     assert m["actuators"]["OPOV"]["time_at_limit"] == pytest.approx((4 / 10 + 0 / 5) / 2)
     assert m["actuators"]["FPOV"]["time_at_limit"] == 0.0
+
+
+def test_steady_state_error_effort_and_travel_by_hand():
+    # 2 episodes x 20 steps: constant Pc error 0.5 % in episode 1; episode 2 leaves after 10
+    # steps with the error rising to 3 % on its last one: each is judged on its own last 10 %
+    steps, dt = 20, 0.1
+    obs = np.zeros((steps + 1, 2, 10))
+    obs[1:, 0, 4] = 0.5
+    obs[1:11, 1, 4] = 0.5
+    obs[10, 1, 4] = -3.0  # step 10's observation (row 10), the last of episode 2
+    actions = np.zeros((steps, 2, 2))
+    actions[:, 0, 0] = 0.5
+    actions[:4, 1, 1] = [0.2, -0.2, 0.2, -0.2]
+    alive = np.ones((steps, 2), dtype=bool)
+    alive[10:, 1] = False
+    rewards = np.full((steps, 2), -1.0)
+    rewards[:10, 1] = -2.0
+    m = metrics(Rollout(obs, actions, actions, rewards, alive, dt), LAYOUTS[TRACKING])
+    # episode 1: its last 2 steps at 0.5; episode 2: its last step (10 // 10 = 1) at 3
+    assert m["outputs"]["Pc"]["steady_state_error"] == pytest.approx((0.5 + 3.0) / 2)
+    assert m["outputs"]["MR"]["steady_state_error"] == 0.0
+    assert m["return_std"] == pytest.approx(np.std([-20.0, -20.0]))
+    # effort: the RMS over every alive step of every episode (20 + 10 of them)
+    assert m["actuators"]["OPOV"]["effort_rms"] == pytest.approx(np.sqrt(20 * 0.25 / 30))
+    assert m["actuators"]["FPOV"]["effort_rms"] == pytest.approx(np.sqrt(4 * 0.04 / 30))
+    # travel: the summed |moves| per episode, the first from 0, averaged: OPOV 0.5 and 0
+    assert m["actuators"]["OPOV"]["travel"] == pytest.approx(0.5 / 2)
+    assert m["actuators"]["FPOV"]["travel"] == pytest.approx((0.2 + 0.4 + 0.4 + 0.4 + 0.2) / 2)
+
+
+@settings(deadline=None, max_examples=40)
+@given(
+    lengths=st.lists(st.integers(1, 40), min_size=1, max_size=6),
+    seed=st.integers(0, 2**32 - 1),
+)
+def test_steady_state_error_is_each_episodes_own_tail_mean(lengths, seed):
+    """Against a loop over the episodes: the mean |error| of the last max(1, n // 10) of each
+    episode's n steps, averaged over the episodes."""
+    rng = np.random.default_rng(seed)
+    horizon, k = max(lengths), len(lengths)
+    obs = rng.normal(size=(horizon + 1, k, 10))
+    alive = np.arange(horizon)[:, None] < np.array(lengths)[None, :]
+    zeros = np.zeros((horizon, k, 2))
+    run = Rollout(obs, zeros, zeros, np.zeros((horizon, k)), alive, 0.04)
+    tails = [np.abs(obs[1 + n - max(1, n // 10) : 1 + n, i, 4]).mean() for i, n in enumerate(lengths)]
+    expected = np.mean(tails)
+    assert metrics(run, LAYOUTS[TRACKING])["outputs"]["Pc"]["steady_state_error"] == pytest.approx(expected)
 
 
 def test_a_nan_controller_is_named_with_its_step():

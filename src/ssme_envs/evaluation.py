@@ -219,6 +219,11 @@ def metrics(run: Rollout, layout: Layout) -> ControllerMetrics:
     returns = (run.rewards * alive).sum(axis=0)
     costs = -returns
     t = np.arange(1, len(alive) + 1) * run.dt
+    # the last 10 % (at least one) of each episode's own steps: an episode that ended early is
+    # judged on how it ended, not on the zeros after its end
+    tail = np.maximum(1, steps // 10)
+    row = np.arange(len(alive))[:, None]
+    in_tail = (row >= steps - tail) & (row < steps)
     outputs: dict[str, OutputMetrics] = {}
     step_rows = run.obs[1:]
     references = step_rows[:, :, list(layout.reference_columns)]  # (T, N, outputs)
@@ -226,12 +231,11 @@ def metrics(run: Rollout, layout: Layout) -> ControllerMetrics:
         e = np.abs(step_rows[:, :, layout.error_columns[i]]) * alive
         y = step_rows[:, :, layout.output_columns[i]]
         r = run.obs[:, :, layout.reference_columns[i]]
-        tail = max(1, len(alive) // 10)
         outputs[name] = OutputMetrics(
             iae=float((e.sum(axis=0) * run.dt).mean()),
             ise=float(((e**2).sum(axis=0) * run.dt).mean()),
             itae=float(((t[:, None] * e).sum(axis=0) * run.dt).mean()),
-            steady_state_error=float(e[-tail:].mean()),
+            steady_state_error=float(((e * in_tail).sum(axis=0) / tail).mean()),
             **step_response(t, y, r, alive),
             **_limit_cycles(step_rows[:, :, layout.error_columns[i]], references, alive, run.dt),
         )

@@ -46,7 +46,8 @@ class OutputMetrics(_ByName):
     iae, ise, itae : float
         Integrals of the absolute, squared and time-weighted absolute error.
     steady_state_error : float
-        Mean absolute error over the last 10 % of the episode.
+        Mean absolute error over the last 10 % (at least one step) of each episode's own
+        steps, averaged over the episodes: an episode that ended early counts its last steps.
     rise_time, settling_time, overshoot : float
         Step metrics over the episodes whose reference is one step (NaN when there is none).
     limit_cycle_fraction : float
