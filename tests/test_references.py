@@ -80,3 +80,13 @@ def test_unit_normals_are_standard_normal_and_batch_independent():
     assert abs(np.corrcoef(normals[:251].ravel(), normals[251:].ravel())[0, 1]) < 0.01
     for i in (0, 150, 299):
         assert np.array_equal(unit_normals(np.ascontiguousarray(uniforms[:, i : i + 1]))[:, 0], normals[:, i])
+
+
+def test_every_step_and_ramp_episode_moves():
+    """The shape checks above accept an episode without a step or ramp: every drawn episode has
+    one, so those checks always run on a real step or ramp."""
+    _, steps = _draw("step", 100)
+    _, ramps = _draw("ramp", 100)
+    for i in range(100):
+        assert np.flatnonzero(steps[0, :, i] != 0).size > 0
+        assert np.flatnonzero(np.diff(ramps[0, :, i]) != 0).size > 0
