@@ -358,3 +358,40 @@ def test_a_relay_limit_cycle_is_named_by_the_metrics():
     periods = [_zero_crossing_period(tails[:, i], run.dt) for i in range(4)]
     assert pc.limit_cycle_period == pytest.approx(np.median(periods), rel=0.1)
     assert 0.7 < pc.limit_cycle_amplitude / np.median(np.ptp(tails, axis=0) / 2) < 1.45
+
+
+@settings(deadline=None, max_examples=30)
+@given(
+    at=st.integers(1, 60),
+    size=st.floats(0.2, 2.0) | st.floats(-2.0, -0.2),
+    base=st.floats(-1.0, 1.0),
+    zeta=st.floats(0.2, 1.2),
+    wn=st.floats(2.0, 8.0),
+)
+def test_step_response_windows_each_episode_at_its_reference_step(at, size, base, zeta, wn):
+    """A rollout's output is a second-order step response (scipy, zero-order hold) that starts
+    with the first observation of the new reference, offset by a baseline: its metrics are
+    python-control's step_info of that response, normalized by the reference step; episodes with
+    two reference steps or an early end do not count."""
+    import control
+
+    from ssme_envs.metrics import step_response
+
+    dt, horizon = 0.04, 200
+    system = scipy.signal.cont2discrete(([wn * wn], [1.0, 2 * zeta * wn, wn * wn]), dt)
+    unit = np.ravel(scipy.signal.dstep((*system[:2], dt), n=horizon + 1 - at)[1][0])
+    unit = np.concatenate([unit[1:], unit[-1:]])  # a sample after the step: the response has begun
+    t = np.arange(1, horizon + 1) * dt  # the time of each step's observation (rows 1..T)
+    r = np.zeros((horizon + 1, 3))
+    r[at + 1 :] = size
+    r[at + 30 :, 1] = 0.0  # episode 1: a second step
+    y = np.full((horizon, 3), base)
+    y[at:] = base + size * unit[: horizon - at, None]  # y row j is the observation of step j + 1
+    y[:, 1] += 5.0
+    alive = np.ones((horizon, 3), dtype=bool)
+    alive[-1, 2] = False  # episode 2 ended before the horizon
+    ours = step_response(t, y, r, alive)
+    theirs = control.step_info(unit[: horizon - at], T=t[at:] - t[at], yfinal=1.0)
+    assert ours["rise_time"] == pytest.approx(theirs["RiseTime"], abs=1e-9, nan_ok=True)
+    assert ours["settling_time"] == pytest.approx(theirs["SettlingTime"], abs=1e-9, nan_ok=True)
+    assert ours["overshoot"] == pytest.approx(theirs["Overshoot"], abs=1e-7)

@@ -10,13 +10,16 @@ and in a batch (the tests hold the vector env to gymnasium's ``SyncVectorEnv`` b
 from __future__ import annotations
 
 import math
-import reprlib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, NamedTuple, Protocol, runtime_checkable
 
 import gymnasium as gym
 import numpy as np
+
+# ``shown``: a value cut short for a message, the one helper of the models' messages (a long
+# integer by its size: ``reprlib.repr`` of an int past 4300 digits raised Python's own ValueError)
+from ssme_envs.models.linear import describe as shown
 
 Value = Any  # a Python float (one env) or an (N,) float64 row (a batch)
 
@@ -204,11 +207,6 @@ def real_number(value: Any) -> float | None:
         return float(value)
     except OverflowError:
         return math.inf if value > 0 else -math.inf
-
-
-def shown(value: Any) -> str:
-    """``repr(value)`` cut to a readable length for a message (a 10**400 has 401 digits)."""
-    return reprlib.repr(value)
 
 
 def check_number(name: str, value: Any, low: float, high: float, low_open: bool = False) -> float:

@@ -16,16 +16,79 @@ from typing import Any
 
 import numpy as np
 
-_SHORT = reprlib.Repr()  # bounded in depth and length: a file's value may be a deep or long list
+
+class _Short(reprlib.Repr):
+    """``reprlib.Repr`` bounded in depth and length (a file's value may be a deep or long list), with
+    a long integer by its size, wherever it sits: ``repr`` of an int past 4300 digits raises."""
+
+    def repr_int(self, x: int, level: int) -> str:
+        if abs(x) >= 10**20:  # by bit length: str() of an integer past 4300 digits raises
+            return f"an integer of about {int(x.bit_length() * math.log10(2)) + 1} digits"
+        return super().repr_int(x, level)
+
+
+_SHORT = _Short()
 _SHORT.maxlevel, _SHORT.maxstring, _SHORT.maxother, _SHORT.maxlong = 3, 60, 60, 60
 
 
 def describe(value: Any) -> str:
     """``value`` for an error message, kept short: a long integer by its size, others cut."""
-    if isinstance(value, int) and not isinstance(value, bool) and abs(value) >= 10**20:
-        # by bit length: str() of an integer past 4300 digits raises
-        return f"an integer of about {int(value.bit_length() * math.log10(2)) + 1} digits"
     return _SHORT.repr(value)
+
+
+def boolean_text(value: Any) -> str:
+    """``"a boolean (true)"``: a JSON or TOML boolean as its file spells it, for a message."""
+    return f"a boolean ({'true' if value else 'false'})"
+
+
+_PLAIN_NUMBERS = frozenset((float, int))  # by exact type: bool is a subclass of int
+
+
+def _not_number(item: Any) -> bool:
+    # what numpy's float conversion takes that is no number of a file: a bool (an int to Python),
+    # text ("1.5" converts), null (None converts to NaN)
+    return item is None or isinstance(item, bool | np.bool_ | str | bytes | np.str_ | np.bytes_)
+
+
+def non_number_at(value: Any) -> tuple[tuple[int, ...], Any] | None:
+    """The index and entry of the first boolean, text or null in ``value`` (a number, a nested
+    list or tuple, an array), or None: numpy converts ``True`` to 1.0, ``"1.5"`` to 1.5 and
+    ``None`` to NaN, so a JSON ``true``, ``"1.5"`` or ``null`` in a matrix would pass as a number."""
+    if _not_number(value):
+        return (), value
+    if isinstance(value, np.ndarray):
+        if value.dtype.kind in "bUS" and value.size:
+            return (0,) * value.ndim, value.flat[0].item()
+        if value.dtype != object:
+            return None
+        value = value.tolist()
+    if isinstance(value, list | tuple):
+        if all(type(item) in _PLAIN_NUMBERS for item in value):  # a row as JSON gives it: fast
+            return None
+        for i, item in enumerate(value):
+            if _not_number(item):
+                return (i,), item
+            if isinstance(item, list | tuple | np.ndarray):
+                found = non_number_at(item)
+                if found is not None:
+                    return (i, *found[0]), found[1]
+    return None
+
+
+def refuse_non_numbers(value: Any, name: str) -> None:
+    """ValueError naming the first boolean, text or null entry of ``value``, e.g. ``"A[1][2] is a
+    boolean (true), not a number"``; call it once ``value`` converted to a float array (its depth
+    is then bounded)."""
+    found = non_number_at(value)
+    if found is not None:
+        index, item = found
+        if item is None:
+            what = "null"
+        elif isinstance(item, bool | np.bool_):
+            what = boolean_text(item)
+        else:
+            what = f"text ({describe(item)})"
+        raise ValueError(f"{name}{''.join(f'[{i}]' for i in index)} is {what}, not a number")
 
 
 def finite_float(value: Any, name: str) -> float:
@@ -34,7 +97,9 @@ def finite_float(value: Any, name: str) -> float:
     Booleans are refused (JSON's ``true`` is no number), and so are integers beyond a float's
     range, which JSON files can hold (``1e400`` reads as inf, ``1`` and 400 zeros as an int).
     """
-    if isinstance(value, numbers.Real) and not isinstance(value, bool):
+    if isinstance(value, bool | np.bool_):
+        raise ValueError(f"{name} must be a finite number, got {boolean_text(value)}")
+    if isinstance(value, numbers.Real):
         try:
             result = float(value)
         except OverflowError:
@@ -51,19 +116,23 @@ def check_dt(dt: Any) -> float:
     except ValueError:
         value = math.nan
     if not value > 0:
-        raise ValueError(f"dt must be a positive number of seconds, got {describe(dt)}")
+        got = boolean_text(dt) if isinstance(dt, bool | np.bool_) else describe(dt)
+        raise ValueError(f"dt must be a positive number of seconds, got {got}")
     return value
 
 
 def as_floats(value: Any, name: str, expected: str) -> np.ndarray:
     """``value`` as a float array; ValueError saying ``name`` must be ``expected`` when it holds
-    anything but numbers (an object, text, an integer too large for a float)."""
+    anything but numbers (an object, text, an integer too large for a float), or naming the entry
+    that is a boolean, text or null (``"A[1][2] is a boolean (true), not a number"``)."""
     try:
-        return np.asarray(value, dtype=float)
+        result = np.asarray(value, dtype=float)
     except OverflowError:
         raise ValueError(f"{name} must be {expected}: it holds an integer too large for a float") from None
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{name} must be {expected}: {exc}") from None
+    refuse_non_numbers(value, name)  # after the conversion: ``value`` is a regular array, its depth bounded
+    return result
 
 
 def as_matrix(value: Any, name: str, shape: tuple[int | None, int | None]) -> np.ndarray:
@@ -166,7 +235,10 @@ __all__ = [
     "StateSpace",
     "as_floats",
     "as_matrix",
+    "boolean_text",
     "check_dt",
     "describe",
     "finite_float",
+    "non_number_at",
+    "refuse_non_numbers",
 ]

@@ -11,7 +11,7 @@ import numpy as np
 from ssme_envs.models.linear import describe, finite_float
 from ssme_envs.models.nozzle_joint import NozzleParameters
 from ssme_envs.models.statespace import as_matrix, dumps_compact, read_json
-from ssme_envs.models.uncertainty import ParameterUncertainty
+from ssme_envs.models.uncertainty import ParameterUncertainty, check_standard_errors
 
 NOZZLE_MODEL_SCHEMA = "ssme-envs/nozzle-model"
 # Version 2 added the optional ``uncertainty`` blocks in ``linear`` and ``bouc_wen``; version 1
@@ -31,16 +31,7 @@ def _read_uncertainty(block: Any, known: tuple[str, ...], where: str) -> Paramet
         raise ValueError(f"{where}.uncertainty holds an integer too large for a float") from None
     listed = block.get("standard_errors")
     if listed is not None:
-        try:
-            values = np.array(listed, dtype=float)
-        except (TypeError, ValueError, OverflowError):
-            raise ValueError(f"{where}.uncertainty.standard_errors must be a list of numbers") from None
-        expected = result.standard_errors
-        if values.shape != expected.shape or not np.allclose(values, expected, rtol=1e-9, atol=0.0):
-            raise ValueError(
-                f"{where}.uncertainty.standard_errors {listed} disagree with the square roots of the "
-                "covariance's diagonal"
-            )
+        check_standard_errors(listed, result, f"{where}.uncertainty.standard_errors")
     return result
 
 

@@ -15,7 +15,7 @@ import numpy as np
 
 from ssme_envs.input_files import FileTooLarge, NotRegularFile, read_bounded
 from ssme_envs.models.linear import describe
-from ssme_envs.models.uncertainty import ParameterUncertainty
+from ssme_envs.models.uncertainty import ParameterUncertainty, check_standard_errors
 
 if TYPE_CHECKING:
     from ssme_envs.models.statespace import AlphaCanonicalModel
@@ -120,6 +120,12 @@ def engine_model_from_dict(
             )
         except OverflowError:  # its checks convert with float(), which an integer past 1e308 overflows
             raise ValueError(f"{source}: uncertainty holds an integer too large for a float") from None
+        listed = data["uncertainty"].get("standard_errors")  # an object: from_dict checked it
+        if listed is not None:  # read as the nozzle's are: numbers, the covariance's square roots
+            try:
+                check_standard_errors(listed, model.uncertainty, "uncertainty.standard_errors")
+            except ValueError as exc:
+                raise ValueError(f"{source}: {exc}") from None
     return model
 
 

@@ -18,6 +18,8 @@ from typing import Any
 
 import numpy as np
 
+from ssme_envs.models.linear import boolean_text, describe, refuse_non_numbers
+
 # Covariances are symmetric positive semi-definite up to round-off; eigenvalues below this
 # fraction of the largest count as zero when drawing.
 PSD_TOL = 1e-9
@@ -51,6 +53,7 @@ class ParameterUncertainty:
             cov = np.array(self.covariance, dtype=float)
         except (TypeError, ValueError):
             raise ValueError("uncertainty.covariance must be a numeric matrix") from None
+        refuse_non_numbers(self.covariance, "uncertainty.covariance")  # true, "1.5" and null convert
         size = len(names)
         if cov.shape != (size, size):
             raise ValueError(f"uncertainty.covariance has shape {cov.shape}, expected {size} x {size}")
@@ -107,12 +110,29 @@ class ParameterUncertainty:
         if unknown:
             raise ValueError(f"{source}: uncertainty names parameters the model lacks: {', '.join(unknown)}")
         method, samples = data.get("method", ""), data.get("samples", 0)
+        if isinstance(samples, bool):
+            raise ValueError(f"{source}: uncertainty.samples is {boolean_text(samples)}, not an integer")
         if not isinstance(method, str) or not isinstance(samples, int):
             raise ValueError(f"{source}: uncertainty.method must be a string and samples an integer")
         try:
             return cls(tuple(names), data["covariance"], method, samples)
         except ValueError as exc:
             raise ValueError(f"{source}: {exc}") from None
+
+
+def check_standard_errors(listed: Any, uncertainty: ParameterUncertainty, name: str) -> None:
+    """The ``standard_errors`` a file lists beside a covariance (``name`` in messages): ValueError
+    unless numbers equal to the square roots of its diagonal (to 1e-9 relative)."""
+    try:
+        values = np.array(listed, dtype=float)
+    except (TypeError, ValueError, OverflowError):
+        raise ValueError(f"{name} must be a list of numbers") from None
+    refuse_non_numbers(listed, name)
+    expected = uncertainty.standard_errors
+    if values.shape != expected.shape or not np.allclose(values, expected, rtol=1e-9, atol=0.0):
+        raise ValueError(
+            f"{name} {describe(listed)} disagree with the square roots of the covariance's diagonal"
+        )
 
 
 def jacobian(fn: Callable[[np.ndarray], np.ndarray], x: np.ndarray, rel_step: float = 1e-6) -> np.ndarray:
