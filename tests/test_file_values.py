@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import re
+from fractions import Fraction
 from importlib import resources
 from typing import Any
 
@@ -231,3 +232,68 @@ def test_shown_is_describe_and_shows_long_integers_by_their_size_wherever_they_s
     # reprlib.repr of an int past 4300 digits raised Python's own ValueError in place of the message
     with pytest.raises(ValueError, match=r"w must be one number or 2, got \[1, 2, an integer of about"):
         check_numbers("w", [1, 2, 10**5000], 2, 0.0, 1.0)
+
+
+# Keys a loader does not know were dropped without a word: an engine file's "D" (the alpha-
+# canonical engine has no feedthrough) made a model without it; a misspelt key lost its value.
+@pytest.mark.parametrize(
+    ("name", "where", "key", "message"),
+    [
+        ("engine_identified_100.json", (), "D", r"unknown key\(s\) 'D' .*no feedthrough D"),
+        ("engine_identified_70.json", (), "lamda", r"unknown key\(s\) 'lamda'"),
+        ("nozzle_identified.json", (), "bouc-wen", r"unknown key\(s\) 'bouc-wen'"),
+        ("nozzle_identified.json", ("linear",), "j", r"linear: unknown key\(s\) 'j'"),
+    ],
+)
+def test_an_unknown_key_is_refused_naming_it(tmp_path, name, where, key, message):
+    doc = json.loads(DATA.joinpath(name).read_text())
+    block = doc
+    for step in where:
+        block = block[step]
+    block[key] = [[1.0, 0.0], [0.0, 1.0]]
+    path = tmp_path / name
+    path.write_text(json.dumps(doc))
+    with pytest.raises(ValueError, match=re.escape(str(path)) + ": " + message):
+        _load(name)(path)
+
+
+@settings(deadline=None, max_examples=30, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(lam=st.floats(-5.0, 5.0, allow_nan=False), index=st.integers(0, 1))
+def test_lambda_outside_zero_two_is_refused(tmp_path, lam, index):
+    """u* = u + (lambda - 1)|u| gives lambda u above the operating point and (2 - lambda) u below:
+    a lambda outside (0, 2) flips one side's gain, which no valve does."""
+    doc = json.loads(DATA.joinpath("engine_identified_100.json").read_text())
+    doc["lambda"][index] = lam
+    path = tmp_path / "lam.json"
+    path.write_text(json.dumps(doc))
+    exact = Fraction(lam)  # eq 36 in exact arithmetic at u = -1 and +1: each side's gain
+    if all((u + (exact - 1) * abs(u)) / u > 0 for u in (-1, 1)):
+        assert AlphaCanonicalModel.load(path).lam[index] == lam
+    else:
+        with pytest.raises(ValueError, match=r"lambda must lie in \(0, 2\)"):
+            AlphaCanonicalModel.load(path)
+
+
+def test_negative_sample_count_is_refused(tmp_path):
+    doc = json.loads(DATA.joinpath("engine_identified_90.json").read_text())
+    doc["uncertainty"]["samples"] = -3
+    path = tmp_path / "samples.json"
+    path.write_text(json.dumps(doc))
+    with pytest.raises(ValueError, match=r"uncertainty.samples must be >= 0, got -3"):
+        AlphaCanonicalModel.load(path)
+
+
+@pytest.mark.parametrize(
+    "call",
+    [
+        lambda big: __import__("gymnasium").make("ssme_envs/EngineTracking-v0", power=big),
+        lambda big: __import__("gymnasium").make("ssme_envs/NozzleTVC-v0", substeps=big),
+        lambda big: __import__("gymnasium").make("ssme_envs/NozzleTVC-v0", plant_spread=big),
+        lambda big: __import__("ssme_envs.metrics").metrics.limit_cycle(np.zeros(64), np.ones(64, bool), big),
+    ],
+)
+def test_an_integer_of_thousands_of_digits_is_named_by_its_size(call):
+    """Python refuses str() of an int past 4300 digits with a ValueError of its own; the messages
+    name such a value by its size instead."""
+    with pytest.raises(ValueError, match=r"an integer of about 5001 digits"):
+        call(10**5000)

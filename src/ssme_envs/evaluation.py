@@ -18,6 +18,7 @@ import numpy as np
 
 from ssme_envs.evaluation_result import ActuatorMetrics, ControllerMetrics, EvaluationResult, OutputMetrics
 from ssme_envs.metrics import limit_cycle, saturation_fraction, step_metrics, step_response
+from ssme_envs.models.linear import describe
 from ssme_envs.robustness import cvar
 
 NOISE_OFF = {"backlash": 5e-4, "stiction": 2e-4, "sensor_noise": 0.0}
@@ -291,7 +292,9 @@ def check_factories(controllers: Any) -> None:
         )
     for name, factory in controllers.items():
         if not isinstance(name, str) or not callable(factory):
-            raise TypeError(f"controllers: {name!r} must name a factory env -> controller, got {factory!r}")
+            raise TypeError(
+                f"controllers: {name!r} must name a factory env -> controller, got {describe(factory)}"
+            )
 
 
 def evaluate(
@@ -331,7 +334,7 @@ def evaluate(
     """
     check_env_id(env_id)
     if not isinstance(episodes, int) or isinstance(episodes, bool) or episodes < 1:
-        raise ValueError(f"episodes must be a positive integer, got {episodes!r}")
+        raise ValueError(f"episodes must be a positive integer, got {describe(episodes)}")
     check_factories(controllers)
     names = scenario_names(env_id) if scenarios is None else check_scenarios(env_id, scenarios)
     for scenario in names:  # every scenario takes the options, before any work (a few ms each)

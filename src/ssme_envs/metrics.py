@@ -22,6 +22,8 @@ from typing import NamedTuple
 import numpy as np
 import scipy.signal
 
+from ssme_envs.models.linear import describe
+
 # an applied action within this share of full scale from the limit sits at the limit: wide enough
 # for the float32 rounding of the command the env receives (6e-8), far below any real move
 AT_LIMIT_TOL = 1e-6
@@ -57,9 +59,9 @@ def saturation_fraction(
             f"actions must be (T,) or (T, N) with alive of the same shape, got {a.shape}, {live.shape}"
         )
     if not (math.isfinite(limit) and limit > 0):
-        raise ValueError(f"limit must be a positive finite number, got {limit!r}")
+        raise ValueError(f"limit must be a positive finite number, got {describe(limit)}")
     if not (0 <= tol < 1):
-        raise ValueError(f"tol must be within [0, 1), got {tol!r}")
+        raise ValueError(f"tol must be within [0, 1), got {describe(tol)}")
     if not np.isfinite(a[live]).all():
         raise ValueError("actions hold NaN or inf at an alive step")
     steps = live.sum(axis=0)
@@ -162,12 +164,16 @@ def limit_cycle(
         raise ValueError(f"signal must be (T,) with alive of the same shape, got {x.shape}, {live.shape}")
     if not np.isfinite(x[live]).all():
         raise ValueError("signal holds NaN or inf at an alive step")
-    if not (math.isfinite(dt) and dt > 0):
-        raise ValueError(f"dt must be a positive finite time in s, got {dt!r}")
+    try:
+        good_dt = math.isfinite(dt) and dt > 0
+    except (OverflowError, TypeError):  # an int beyond a float's range, or no number
+        good_dt = False
+    if not good_dt:
+        raise ValueError(f"dt must be a positive finite time in s, got {describe(dt)}")
     if not 0 <= settle < 1:
-        raise ValueError(f"settle must be within [0, 1), got {settle!r}")
+        raise ValueError(f"settle must be within [0, 1), got {describe(settle)}")
     if not (isinstance(min_samples, int) and min_samples >= 8):
-        raise ValueError(f"min_samples must be an integer >= 8, got {min_samples!r}")
+        raise ValueError(f"min_samples must be an integer >= 8, got {describe(min_samples)}")
     if not (z > 0 and 0 < min_correlation < 1 and 0 < min_power_ratio <= 1):
         raise ValueError("z must be > 0, min_correlation within (0, 1), min_power_ratio within (0, 1]")
     start = np.ones_like(live)  # where a new window starts

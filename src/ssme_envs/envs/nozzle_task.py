@@ -14,6 +14,7 @@ import numpy as np
 from ssme_envs.envs.plant_spread import PlantSpread, covered_joints, resolve_spread
 from ssme_envs.envs.references import Fault, check_reference, normal_rows, reference_signals, uniforms_needed
 from ssme_envs.envs.task import MAX_EPISODE_SECONDS, SYNCED, Carrier, Observation, Value, check_number
+from ssme_envs.models.linear import describe
 from ssme_envs.models.nozzle import (
     DEFAULT_TORQUE_LIMIT,
     MAX_SUBSTEPS,
@@ -105,7 +106,8 @@ def resolve_nozzle(plant: str | Path | NozzleParameters | NozzleModel) -> tuple[
     if isinstance(plant, str | Path) and str(plant).endswith(".json"):
         return NozzleModel.load(plant).plant(), "table1"
     raise ValueError(
-        f"plant must be one of {', '.join(PLANTS)}, a nozzle model.json path or a model, got {plant!r}"
+        f"plant must be one of {', '.join(PLANTS)}, a nozzle model.json path or a model, "
+        f"got {describe(plant)}"
     )
 
 
@@ -201,7 +203,7 @@ class NozzleTask:
         if substeps is None:  # the worst joint the spread can draw (its corners) sets the count
             substeps = rule_substeps(joints, envelope)
         elif not isinstance(substeps, int) or isinstance(substeps, bool) or not 1 <= substeps <= MAX_SUBSTEPS:
-            raise ValueError(f"substeps must be an integer in 1-{MAX_SUBSTEPS}, got {substeps!r}")
+            raise ValueError(f"substeps must be an integer in 1-{MAX_SUBSTEPS}, got {describe(substeps)}")
         else:  # the caller's count: accuracy is theirs, stability is checked
             for joint in joints:
                 check_stable_substeps(joint, substeps, NOZZLE_DT, envelope, DEFAULT_TORQUE_LIMIT)

@@ -22,12 +22,12 @@ SSME covering its full range of operation"; NASA TM-104421 linked 25 point model
 from __future__ import annotations
 
 import math
-import reprlib
 from functools import cached_property
 
 import numpy as np
 
 from ssme_envs.models.engine import POWER_LEVELS, published_model
+from ssme_envs.models.linear import describe
 from ssme_envs.models.statespace import AlphaCanonicalModel
 
 POWER_RANGE = (65.0, 109.0)  # %, the range the linked model covers (Table I spans 70-110)
@@ -70,7 +70,7 @@ class LinkedEngineModel:
     def check_power(power: float) -> float:
         """The power level as a float, or a ValueError unless a real number (not a bool or a
         string) within 65-109 %."""
-        shown = reprlib.repr(power)  # an int of 400 digits is cut
+        shown = describe(power)  # an int of 400 digits by its size
         if isinstance(power, bool | np.bool_) or not isinstance(
             power, int | float | np.integer | np.floating
         ):

@@ -19,6 +19,7 @@ NOZZLE_MODEL_SCHEMA = "ssme-envs/nozzle-model"
 NOZZLE_MODEL_SCHEMA_VERSION = 2
 _READABLE_VERSIONS = (1, 2)
 _LINEAR_MATRICES = ("A", "B", "C", "D", "K")
+_TOP_KEYS = frozenset(("schema", "schema_version", "input_name", "output_name", "linear", "bouc_wen", "fit"))
 LINEAR_UNCERTAIN = ("J", "b", "k")
 BOUC_WEN_UNCERTAIN = ("J", "b", "k_el", "k_hys", "beta_n", "gamma_n", "n")
 
@@ -154,7 +155,13 @@ class NozzleModel:
             )
         if not isinstance(data.get("linear"), dict):
             raise ValueError(f"{source}: 'linear' must be an object with A, B, C, D, K, dt, J, b, k")
+        unknown = sorted(map(str, set(data) - _TOP_KEYS))
+        if unknown:  # a misspelt key would otherwise be dropped without a word
+            raise ValueError(f"{source}: unknown key(s) {', '.join(map(describe, unknown))}")
         linear = dict(data["linear"])
+        unknown = sorted(map(str, set(linear) - {*_LINEAR_MATRICES, "dt", "J", "b", "k", "uncertainty"}))
+        if unknown:
+            raise ValueError(f"{source}: linear: unknown key(s) {', '.join(map(describe, unknown))}")
         bw = data.get("bouc_wen")
         uncertainty: dict[str, ParameterUncertainty | None] = {"linear": None, "bouc_wen": None}
         try:

@@ -27,6 +27,10 @@ SUPPORTED_ENGINE_SCHEMA_VERSIONS = (1, 2)
 # Identified engine models have tens of states (indices up to 6 per output by default); the bound
 # keeps a corrupt or hostile file from costing minutes and gigabytes in the checks below.
 MAX_MODEL_STATES = 512
+_ENGINE_KEYS = frozenset((
+    "schema", "schema_version", "dt", "A", "B", "C", "observability_indices", "lambda", "input_names",
+    "output_names", "fit", "uncertainty",
+))  # fmt: skip
 # Model files are kB to a few MB; the bound keeps a wrong path (a disk image, a log) from being read.
 MAX_JSON_BYTES = 64 * 1024 * 1024
 
@@ -64,6 +68,12 @@ def engine_model_from_dict(
         raise ValueError(
             f"{source}: unsupported schema_version {describe(version)} "
             f"(expected one of {list(SUPPORTED_ENGINE_SCHEMA_VERSIONS)})"
+        )
+    unknown = sorted(map(str, set(data) - _ENGINE_KEYS))
+    if unknown:  # a misspelt key, or a D the alpha-canonical engine has not, would be dropped
+        raise ValueError(
+            f"{source}: unknown key(s) {', '.join(map(describe, unknown))} (an engine model holds "
+            f"{', '.join(sorted(_ENGINE_KEYS))}; it has no feedthrough D)"
         )
     missing = [k for k in ("dt", "A", "B", "C", "observability_indices", "lambda") if k not in data]
     if missing:
@@ -107,6 +117,12 @@ def engine_model_from_dict(
         raise ValueError(f"{source}: not an engine model: {exc}") from None
     except (TypeError, OverflowError) as exc:  # a value of a type no check above foresaw
         raise ValueError(f"{source}: not an engine model ({type(exc).__name__}: {exc})") from None
+    outside = np.flatnonzero(~((model.lam > 0.0) & (model.lam < 2.0)))
+    if outside.size:  # u* = u + (lambda - 1)|u|: lambda u above the operating point, (2 - lambda) u below
+        raise ValueError(
+            f"{source}: lambda must lie in (0, 2), got {describe(model.lam.tolist())}: outside it the "
+            f"valve gain on one side of the operating point changes sign (input {int(outside[0])})"
+        )
     residual = model.alpha_canonical_residual()
     if not residual <= 1e-9 * max(1.0, float(np.max(np.abs(model.A)))):  # NaN (an overflowing K) fails
         raise ValueError(

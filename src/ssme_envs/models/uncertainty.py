@@ -114,6 +114,8 @@ class ParameterUncertainty:
             raise ValueError(f"{source}: uncertainty.samples is {boolean_text(samples)}, not an integer")
         if not isinstance(method, str) or not isinstance(samples, int):
             raise ValueError(f"{source}: uncertainty.method must be a string and samples an integer")
+        if samples < 0:
+            raise ValueError(f"{source}: uncertainty.samples must be >= 0, got {describe(samples)}")
         try:
             return cls(tuple(names), data["covariance"], method, samples)
         except ValueError as exc:
