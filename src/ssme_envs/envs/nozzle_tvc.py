@@ -40,7 +40,7 @@ class NozzleTVCEnv(TrackingEnv):
     | index | observation | unit | bound |
     |---|---|---|---|
     | 0 | measured angle (sensor noise ``sensor_noise`` rad) | deg | +-20 |
-    | 1 | rate estimate (difference of measured angles) | deg/s | +-2000 |
+    | 1 | rate estimate (difference of measured angles; at step 1 from the rest angle 0) | deg/s | +-2000 |
     | 2 | reference | deg | +-10 |
     | 3 | tracking error (reference - measured) | deg | +-30 |
     | 4 | integral of the error (anti-windup at +-10) | deg s | +-10 |
