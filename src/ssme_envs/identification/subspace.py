@@ -29,6 +29,13 @@ from an operating point, one row per sample. The steps:
 
 5. **Past horizon** ``J`` so that ``(A - K C)^J`` is negligible (rule in :func:`dsr_e`).
 
+Before step 1 a record whose channels differ wildly in size is equilibrated: every input and
+output is divided by the power of two nearest its RMS, and the model found is carried back to
+the record's units (rule in :func:`dsr_e`). Without it the high-order ARX fit of step 1 drops
+the small channels as round-off once their spread times the regression's own condition number
+nears ``1 / eps`` (poles ~1e-5 off), and ``Z``, which weighs the outputs by their units, hides
+a small output's modes from the order selection.
+
 References: D. Di Ruscio, "Subspace system identification of the Kalman filter: open and closed
 loop systems", Proc. IMECS 2008; "Closed and open loop subspace system identification of the
 Kalman filter", Modeling, Identification and Control 30(2), 2009.
@@ -43,6 +50,7 @@ import scipy.linalg
 import scipy.signal
 
 from ssme_envs.identification.alpha_canonical import check_record
+from ssme_envs.identification.channel_scales import equilibration, restore_units
 from ssme_envs.identification.innovations_model import (
     InnovationsModel,
     SubspaceResult,
@@ -321,6 +329,13 @@ def dsr_e(
     refinement, since its outputs are exactly linear in ``n`` past samples. An unstable
     predictor (``rho >= 1``) stops the refinement. ``past_horizon`` reports the ``J`` used.
 
+    **Channel scales.** A record whose channels' RMS values spread by more than 1e6 (or its
+    outputs' by more than 1e3) is equilibrated first, every channel divided by a power of two,
+    and the model carried back to the record's units
+    (:mod:`ssme_envs.identification.channel_scales`); any other record is used as it is. With
+    noisy outputs of moderately different sizes the order selection still weighs them by their
+    units: pass ``order=`` or scale such a record beforehand.
+
     Raises
     ------
     ValueError
@@ -352,12 +367,16 @@ def dsr_e(
             f"need at least {needed} (use a longer record or smaller horizons)"
         )
 
+    scales = equilibration(u, y)
+    if scales is not None:
+        u, y = np.ldexp(u, -scales[0]), np.ldexp(y, -scales[1])
     model, singular_values, found, noise_free = _identify_once(u, y, dt, past, future, order, max_order)
     if past_horizon is None and not noise_free:
         cap = _past_horizon_cap(n_samples, m, p, future)
         for _ in range(HORIZON_REFINEMENTS):
             rho = float(np.max(np.abs(np.linalg.eigvals(model.A - model.K @ model.C))))
-            if rho**past <= PREDICTOR_DECAY or rho >= 1.0:
+            # rho >= 1 first: a wildly unstable predictor's rho**past overflows
+            if rho >= 1.0 or rho**past <= PREDICTOR_DECAY:
                 break
             wanted = min(math.ceil(math.log(PREDICTOR_DECAY) / math.log(rho)), cap)
             if wanted <= past:
@@ -366,6 +385,8 @@ def dsr_e(
             model, singular_values, found, noise_free = _identify_once(
                 u, y, dt, past, future, order, max_order
             )
+    if scales is not None:
+        model, singular_values = restore_units(model, singular_values, *scales)
     return SubspaceResult(model, singular_values, found, past, future)
 
 
