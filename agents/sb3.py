@@ -91,7 +91,6 @@ def train(config: dict[str, Any], out: Path, progress: bool = True, source: str 
     steps, hyper, note = plan_steps(config)
     config = {**config, "hyperparameters": hyper}  # config.toml records a fitted n_steps
     bar = progress and all(importlib.util.find_spec(m) is not None for m in ("tqdm", "rich"))
-    out.mkdir(parents=True, exist_ok=True)
     algo, env_id, seed, n = config["algo"], config["env"], config["seed"], config["num_envs"]
     options = config["env_options"]
     residual = Residual(config["residual"], config["residual_scale"]) if "residual" in config else None
@@ -115,6 +114,9 @@ def train(config: dict[str, Any], out: Path, progress: bool = True, source: str 
                                   norm_reward=False)  # fmt: skip
     except TypeError as exc:  # an option the env does not take
         raise ValueError(f"{source}: env_options: {exc}") from None
+    except ValueError as exc:  # a value the env refuses: the message names it, the file where it is
+        raise ValueError(f"{source}: {exc}") from None
+    out.mkdir(parents=True, exist_ok=True)  # once the envs are made: a refused config leaves nothing
     policy_kwargs = dict(config["policy"]) or None
     try:
         model = _algorithm(algo)(

@@ -84,6 +84,24 @@ def test_bad_training_configs_exit_2_with_one_error_line_before_training(
     assert not (tmp_path / "run").exists()  # refused before the run directory was made
 
 
+@pytest.mark.parametrize(
+    ("body", "message"),
+    [
+        ("[env_options]\nsensor_noise = -1.0", "sensor_noise must be a number in [0, "),
+        ('[env_options]\nplant = "steel"', "plant must be one of"),
+        ("[env_options]\nwobble = 1", "env_options: "),
+    ],
+)
+def test_bad_env_options_name_the_config_file_and_leave_no_run(tmp_path, capsys, body, message):
+    """A value the env refuses reaches the user as one line naming the config file; nothing of
+    the run is written."""
+    config = _config(tmp_path, "ppo", body)
+    assert main(["train", "--config", str(config), "--steps", "64", "--out", str(tmp_path / "run")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith(f"error: config {config}: ") and message in err, err
+    assert not (tmp_path / "run").exists()
+
+
 def test_the_command_itself_prints_one_line_not_a_traceback(tmp_path):
     """Through ``python -m ssme_envs.cli``: cases that ended in tracebacks deep inside SB3 or torch."""
     cases = [BAD_TRAINING[0], BAD_TRAINING[6], BAD_TRAINING[7]]  # batch_size 0, _init_setup_model, net_arch
