@@ -29,12 +29,8 @@ from an operating point, one row per sample. The steps:
 
 5. **Past horizon** ``J`` so that ``(A - K C)^J`` is negligible (rule in :func:`dsr_e`).
 
-Before step 1 a record whose channels differ wildly in size is equilibrated: every input and
-output is divided by the power of two nearest its RMS, and the model found is carried back to
-the record's units (rule in :func:`dsr_e`). Without it the high-order ARX fit of step 1 drops
-the small channels as round-off once their spread times the regression's own condition number
-nears ``1 / eps`` (poles ~1e-5 off), and ``Z``, which weighs the outputs by their units, hides
-a small output's modes from the order selection.
+Before step 1 a record whose channels differ wildly in size is equilibrated by powers of two
+(:mod:`ssme_envs.identification.channel_scales`).
 
 References: D. Di Ruscio, "Subspace system identification of the Kalman filter: open and closed
 loop systems", Proc. IMECS 2008; "Closed and open loop subspace system identification of the
@@ -47,7 +43,6 @@ import math
 
 import numpy as np
 import scipy.linalg
-import scipy.signal
 
 from ssme_envs.identification.alpha_canonical import check_record
 from ssme_envs.identification.channel_scales import equilibration, restore_units
@@ -58,6 +53,7 @@ from ssme_envs.identification.innovations_model import (
     second_order_parameters,
     to_continuous,
 )
+from ssme_envs.identification.subspace_regression import input_matrices, spectral_radius
 from ssme_envs.models.linear import check_dt
 
 DEFAULT_MAX_ORDER = 10
@@ -179,65 +175,6 @@ def _shift_invariance(obs: np.ndarray, p: int) -> tuple[np.ndarray, np.ndarray]:
     return a, obs[:p].copy()
 
 
-def _output_powers(a: np.ndarray, c: np.ndarray, count: int) -> np.ndarray:
-    """``C A^k`` for k = 0..count-1, shape (count, p, n), by doubling."""
-    powers = c[None]
-    a_pow = a
-    while powers.shape[0] < count:
-        powers = np.concatenate([powers, powers @ a_pow])
-        a_pow = a_pow @ a_pow
-    return powers[:count]
-
-
-def _input_matrices(
-    a: np.ndarray, c: np.ndarray, u: np.ndarray, y: np.ndarray, e: np.ndarray | None
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(B, D, K) by least squares given A, C, the inputs and the innovations.
-
-    Choice: regression on simulated unit responses rather than on an estimated state sequence.
-    Given A and C the output ``y(k) - e(k) = C A^k x0 + sum_j C A^(k-1-j) [B K] [u; e](j) + D u(k)``
-    is linear in ``x0``, ``B``, ``K`` and ``D``, so one least-squares fit over the whole record
-    gives them all, with no state estimate, no further horizon, and an exact answer on noise-free
-    data. The unit responses are convolutions of ``C A^k`` with each input channel (FFT).
-    ``e`` is None for a noise-free record (then K = 0).
-    """
-    horizon, m = u.shape
-    p, n = c.shape
-    drive = u if e is None else np.hstack([u, e])
-    target = y if e is None else y - e
-    n_drive = drive.shape[1]
-    powers = _output_powers(a, c, horizon)  # (T, p, n)
-    conv = scipy.signal.fftconvolve(powers[:, :, :, None], drive[:, None, None, :], axes=0)[:horizon]
-    responses = np.zeros((horizon, p, n, n_drive))
-    responses[1:] = conv[:-1]  # state k sums inputs up to k-1
-    feedthrough = np.zeros((horizon, p, p, m))
-    for i in range(p):
-        feedthrough[:, i, i, :] = u
-    phi = np.concatenate(
-        [powers, responses.reshape(horizon, p, n * n_drive), feedthrough.reshape(horizon, p, p * m)], axis=2
-    ).reshape(horizon * p, -1)
-    if not np.all(np.isfinite(phi)):
-        raise ValueError(
-            f"the identified A is unstable (spectral radius {np.max(np.abs(np.linalg.eigvals(a))):.4g}) "
-            "and its unit responses overflow over the record: try another order or horizons"
-        )
-    # columns to unit norm: the rank test (relative to the largest singular value) then does not
-    # depend on the units of the inputs against those of the initial state's columns
-    norms = np.linalg.norm(phi, axis=0)
-    norms[norms == 0.0] = 1.0
-    theta, _, rank, _ = np.linalg.lstsq(phi / norms, target.reshape(-1), rcond=None)
-    theta = theta / norms
-    if rank < phi.shape[1]:
-        raise ValueError(
-            f"the inputs do not determine B and D (regression rank {rank} of {phi.shape[1]}): "
-            "use a richer input, a lower order or longer horizons"
-        )
-    gains = theta[n : n + n * n_drive].reshape(n, n_drive)
-    d = theta[n + n * n_drive :].reshape(p, m)
-    k = gains[:, m:] if e is not None else np.zeros((n, p))
-    return gains[:, :m], d, k
-
-
 def _identify_once(
     u: np.ndarray,
     y: np.ndarray,
@@ -270,7 +207,7 @@ def _identify_once(
         )
     obs = left[:, :order] * np.sqrt(singular_values[:order])
     a, c = _shift_invariance(obs, p)
-    b, d, k = _input_matrices(a, c, u[past:], y[past:], None if noise_free else e)
+    b, d, k = input_matrices(a, c, u[past:], y[past:], None if noise_free else e)
     return InnovationsModel(a, b, c, d, k, dt), singular_values, order, noise_free
 
 
@@ -315,9 +252,9 @@ def dsr_e(
     ``log10 s_n - log10 s_(n+1)``, among the ``n`` whose ``s_n / s_1`` exceeds 1e-10 (below that
     the values are round-off, and gaps between them mean nothing); with noisy data also
     ``s_(n+1) / s_1`` must exceed 1e-10, since a drop to round-off is then the rank limit of the
-    horizons rather than the system's order. Noise-free data show a drop
-    of ten decades or more at the true order; with noise the values beyond the order sit on a
-    floor that falls as ``1 / sqrt(T)`` relative to ``s_1``. A weak, barely excited mode can
+    horizons rather than the system's order. Noise-free data show a drop of ten decades or
+    more at the true order; with noise the values beyond the order sit on a floor that falls as
+    ``1 / sqrt(T)`` relative to ``s_1``. A weak, barely excited mode can
     have a smaller drop than a strong one: inspect ``singular_values`` and pass ``order=``.
 
     **Past horizon.** The innovations estimate neglects ``(A - K C)^J x(k - J)``. Without
@@ -327,14 +264,13 @@ def dsr_e(
     the stacked data matrix keeps at least 6 columns per row (about ``T / (6 (m + p))``); a
     noise-free record (innovations below 1e-9 of the output spread) gets ``K = 0`` and no
     refinement, since its outputs are exactly linear in ``n`` past samples. An unstable
-    predictor (``rho >= 1``) stops the refinement. ``past_horizon`` reports the ``J`` used.
+    predictor (``rho >= 1``) stops the refinement, and so does a refined pass that fails or
+    turns a stable ``A`` unstable (the earlier pass is kept). ``past_horizon`` reports the ``J``
+    used.
 
-    **Channel scales.** A record whose channels' RMS values spread by more than 1e6 (or its
-    outputs' by more than 1e3) is equilibrated first, every channel divided by a power of two,
-    and the model carried back to the record's units
-    (:mod:`ssme_envs.identification.channel_scales`); any other record is used as it is. With
-    noisy outputs of moderately different sizes the order selection still weighs them by their
-    units: pass ``order=`` or scale such a record beforehand.
+    **Channel scales.** A record whose channels spread beyond 1e6 in RMS (its outputs beyond
+    1e3) is equilibrated first (:mod:`~ssme_envs.identification.channel_scales`). Noisy outputs
+    of moderately different sizes still weigh by their units: pass ``order=`` or scale them.
 
     Raises
     ------
@@ -374,17 +310,21 @@ def dsr_e(
     if past_horizon is None and not noise_free:
         cap = _past_horizon_cap(n_samples, m, p, future)
         for _ in range(HORIZON_REFINEMENTS):
-            rho = float(np.max(np.abs(np.linalg.eigvals(model.A - model.K @ model.C))))
+            rho = spectral_radius(model.A - model.K @ model.C)
             # rho >= 1 first: a wildly unstable predictor's rho**past overflows
             if rho >= 1.0 or rho**past <= PREDICTOR_DECAY:
                 break
             wanted = min(math.ceil(math.log(PREDICTOR_DECAY) / math.log(rho)), cap)
             if wanted <= past:
                 break
+            try:
+                refined = _identify_once(u, y, dt, wanted, future, order, max_order)
+            except ValueError:  # the longer horizon's model fails where this one stands: keep it
+                break
+            if spectral_radius(refined[0].A) >= 1.0 > spectral_radius(model.A):  # nor stable for unstable
+                break
             past = wanted
-            model, singular_values, found, noise_free = _identify_once(
-                u, y, dt, past, future, order, max_order
-            )
+            model, singular_values, found, noise_free = refined
     if scales is not None:
         model, singular_values = restore_units(model, singular_values, *scales)
     return SubspaceResult(model, singular_values, found, past, future)
