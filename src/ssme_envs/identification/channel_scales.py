@@ -24,9 +24,8 @@ from ssme_envs.identification.innovations_model import InnovationsModel
 #   spread times the ARX regression's column-normalized condition number (3e4 there) nears
 #   1 / eps and the rank-revealing least squares of step 1 drops the small channels. 1e6 keeps
 #   three to four decades of margin, and keeps the nozzle bench records (torque against angle,
-#   spread 9.4e4, condition number 3e3) on the unscaled algorithm, bit for bit: their packaged
-#   models pin J, b, k to 1e-9, and these come through a matrix logarithm and ss2tf that amplify
-#   rounding (equilibrating moves them by up to 1e-10 on these records, 2e-7 on rescaled copies).
+#   spread 9.4e4, condition number 3e3) on the unscaled algorithm, bit for bit, so that the
+#   packaged nozzle models stay what their pipeline gave.
 CHANNEL_SPREAD = 1e6
 # - Order selection, outputs among themselves: Z weighs the outputs by their units, so a small
 #   output's modes sit below a large one's by the spread, and on noise-free records the largest

@@ -9,7 +9,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg
-import scipy.signal
 
 from ssme_envs.models.linear import Dimensions, StateSpace, check_dt
 
@@ -125,6 +124,10 @@ def to_continuous(model: InnovationsModel) -> tuple[np.ndarray, np.ndarray, np.n
 
     The exact inverse of ZOH: ``logm([[A, B], [0, I]]) / dt`` holds ``[[Ac, Bc], [0, 0]]``.
     ``Ac`` in 1/s, ``Bc`` in output units per input unit per s; ``Cc = C``, ``Dc = D``.
+    ``B`` enters the logarithm divided by the power of two nearest its largest entry, and ``Bc``
+    is multiplied back: the similarity ``diag(I, s I)`` leaves ``Ac`` and ``Bc / s`` exact, so
+    the result does not depend on the input's units (entries of 1e150 in ``B`` overflowed the
+    logarithm's squarings).
 
     Raises
     ------
@@ -139,9 +142,11 @@ def to_continuous(model: InnovationsModel) -> tuple[np.ndarray, np.ndarray, np.n
                 f"A has the eigenvalue {pole.real:.6g} on the negative real axis or at zero: the "
                 "zero-order hold cannot be inverted (no real continuous-time equivalent)"
             )
+    largest = float(np.max(np.abs(model.B), initial=0.0))
+    b_exp = int(np.round(np.log2(largest))) if largest > 0 else 0
     block = np.zeros((n + m, n + m))
     block[:n, :n] = model.A
-    block[:n, n:] = model.B
+    block[:n, n:] = np.ldexp(model.B, -b_exp)
     block[n:, n:] = np.eye(m)
     log_block = scipy.linalg.logm(block)
     if np.iscomplexobj(log_block):
@@ -149,7 +154,29 @@ def to_continuous(model: InnovationsModel) -> tuple[np.ndarray, np.ndarray, np.n
             raise ValueError("the matrix logarithm of the model is not real: no continuous equivalent")
         log_block = log_block.real
     gen = log_block / model.dt
-    return gen[:n, :n], gen[:n, n:], model.C.copy(), model.D.copy()
+    return gen[:n, :n], np.ldexp(gen[:n, n:], b_exp), model.C.copy(), model.D.copy()
+
+
+def _second_order_transfer(
+    ac: np.ndarray, bc: np.ndarray, cc: np.ndarray, dc: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Numerator [b2, b1, b0] and denominator [1, a1, a0] of ``Cc (sI - Ac)^-1 Bc + Dc``, 2 states.
+
+    The polynomials of ``scipy.signal.ss2tf``, written out for two states: ``a1 = -tr Ac``,
+    ``a0 = det Ac``, and with ``adj(sI - Ac) = sI - adj(Ac)``, ``b2 = Dc``,
+    ``b1 = Cc Bc + Dc a1``, ``b0 = Dc a0 - Cc adj(Ac) Bc``. ss2tf forms the numerator as
+    ``poly(Ac - Bc Cc) - poly(Ac)``, whose constant terms cancel to ``b0`` (``a0 + b0`` minus
+    ``a0``): it loses ``log10(a0 / b0)`` digits (``a0 / b0 = k``), about 5 on the nozzle in N m
+    and rad (J, b, k 4e-11 to 1e-10 off), all of them once the angle is in units 1e10 times
+    larger.
+    """
+    a1 = -(ac[0, 0] + ac[1, 1])
+    a0 = ac[0, 0] * ac[1, 1] - ac[0, 1] * ac[1, 0]
+    adjugate = np.array([[ac[1, 1], -ac[0, 1]], [-ac[1, 0], ac[0, 0]]])
+    # adj(Ac) Bc first: Bc and Cc may carry reciprocal unit scales that would overflow together
+    b1 = float((cc @ bc)[0, 0] + dc[0, 0] * a1)
+    b0 = float(dc[0, 0] * a0 - (cc @ (adjugate @ bc))[0, 0])
+    return np.array([float(dc[0, 0]), b1, b0]), np.array([1.0, float(a1), float(a0)])
 
 
 def second_order_parameters(model: InnovationsModel) -> dict[str, float | list[float]]:
@@ -159,6 +186,8 @@ def second_order_parameters(model: InnovationsModel) -> dict[str, float | list[f
     ``(b2 s^2 + b1 s + b0) / (s^2 + a1 s + a0)``; the physical model has
     ``(1/J) / (s^2 + (b/J) s + k/J)``, so ``J = 1/b0``, ``b = a1 J``, ``k = a0 J``. An identified
     model usually also has small ``b1`` and ``b2`` (sampling zeros, noise), reported as they are.
+    The coefficients come in closed form (:func:`_second_order_transfer`), with no difference of
+    polynomials: J, b, k keep their digits whatever the units of torque and angle.
 
     Returns
     -------
@@ -182,11 +211,8 @@ def second_order_parameters(model: InnovationsModel) -> dict[str, float | list[f
         )
     if model.n_states != 2:
         raise ValueError(f"a second-order model is needed, got order {model.n_states}")
-    ac, bc, cc, dc = to_continuous(model)
-    num, den = scipy.signal.ss2tf(ac, bc, cc, dc)
-    num = np.asarray(num, dtype=float).ravel() / den[0]
-    den = np.asarray(den, dtype=float) / den[0]
-    b2, b1, b0 = num[-3:]
+    num, den = _second_order_transfer(*to_continuous(model))
+    b2, b1, b0 = num
     _, a1, a0 = den
     if abs(b0) <= 1e-12 * max(np.max(np.abs(num)), 1e-300):
         raise ValueError("the model has no static gain (b0 = 0): J = 1/b0 is undefined")

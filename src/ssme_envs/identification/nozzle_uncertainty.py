@@ -9,8 +9,9 @@ model and reads the covariance of (J, b, k) off the replicates:
 
 1. **Noise.** The innovations estimate of DSR_e's first stage (the residual of the high-order
    ARX projection, :func:`ssme_envs.identification.subspace.dsr_e` step 1, at the past horizon
-   the identification used), centred and inflated by ``sqrt(N_e / (N_e - P))`` for the ``P``
-   regression coefficients it cost.
+   the identification used and on the record scaled as DSR_e scales it, in the record's units),
+   centred and inflated by ``sqrt(N_e / (N_e - P))`` for the ``P`` regression coefficients it
+   cost.
 2. **Replicates.** Each replicate draws ``T`` values of that noise with replacement (its own
    :class:`numpy.random.Generator` from ``SeedSequence(seed).spawn``, so the result does not
    depend on ``workers``) and adds them to the model's output under the record's torque:
@@ -52,6 +53,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.signal
 
+from ssme_envs.identification.channel_scales import equilibration
 from ssme_envs.identification.subspace import SubspaceResult, _innovations, dsr_e, second_order_parameters
 from ssme_envs.models.statespace import check_dt
 from ssme_envs.models.uncertainty import ParameterUncertainty
@@ -174,6 +176,25 @@ def _siso(x: np.ndarray, name: str) -> np.ndarray:
     return x
 
 
+def _record_innovations(u: np.ndarray, y: np.ndarray, past: int) -> np.ndarray:
+    """DSR_e's innovations estimate of the record (its step 1), in the record's output units.
+
+    DSR_e equilibrates a record whose channels spread widely (:func:`equilibration`) and takes
+    this estimate on the equilibrated record. Taken on the record as it is, the rank-revealing
+    ARX regression drops the small channel's lags as round-off once the spread times the
+    regression's condition number nears ``1 / eps``: on a 1000-sample nozzle record (past
+    horizon 10) the residual was 8 % off from a spread of 1e13 and 200 times the noise at 1e20,
+    and the standard errors with it. The powers of two and their undoing are exact, and a
+    balanced record is used as it is (its residuals bit for bit).
+    """
+    u, y = u[:, None], y[:, None]
+    scales = equilibration(u, y)
+    if scales is None:
+        return _innovations(u, y, past)[:, 0]
+    u_exp, y_exp = scales
+    return np.ldexp(_innovations(np.ldexp(u, -u_exp), np.ldexp(y, -y_exp), past)[:, 0], y_exp[0])
+
+
 def dsr_e_uncertainty(
     u: np.ndarray,
     y: np.ndarray,
@@ -231,7 +252,7 @@ def dsr_e_uncertainty(
     if past >= u.size // 2:
         raise ValueError(f"the record ({u.size} samples) is too short for the past horizon {past}")
 
-    residual = _innovations(u[:, None], y[:, None], past)[:, 0]
+    residual = _record_innovations(u, y, past)
     coefficients = 1 + 2 * past  # u(k) and u, y at lags 1..past
     if residual.size <= 2 * coefficients:
         raise ValueError(f"the record ({u.size} samples) is too short for the past horizon {past}")
