@@ -297,3 +297,24 @@ def test_an_integer_of_thousands_of_digits_is_named_by_its_size(call):
     name such a value by its size instead."""
     with pytest.raises(ValueError, match=r"an integer of about 5001 digits"):
         call(10**5000)
+
+
+def test_an_unknown_key_in_an_uncertainty_block_is_refused(tmp_path):
+    doc = json.loads(DATA.joinpath("engine_identified_80.json").read_text())
+    doc["uncertainty"]["standard_error"] = [1.0]  # misspelt: it would have been dropped
+    path = tmp_path / "u.json"
+    path.write_text(json.dumps(doc))
+    with pytest.raises(ValueError, match=r"uncertainty: unknown key\(s\) 'standard_error'"):
+        AlphaCanonicalModel.load(path)
+
+
+@pytest.mark.parametrize(
+    ("name", "key"), [("engine_identified_100.json", "dt"), ("nozzle_identified.json", "J")]
+)
+def test_null_at_a_number_key_is_named_null(tmp_path, name, key):
+    doc = json.loads(DATA.joinpath(name).read_text())
+    (doc if name.startswith("engine") else doc["linear"])[key] = None
+    path = tmp_path / name
+    path.write_text(json.dumps(doc))
+    with pytest.raises(ValueError, match=rf"{key} must be a (finite|positive) number.*, got null$"):
+        _load(name)(path)

@@ -117,7 +117,8 @@ def write_evaluation(results: EvaluationResult, out: Path, command: str) -> Path
     lines += [
         "Return: mean ± std over the episodes (higher is better); cost CVaR90: mean cost of the worst 10 %; "
         "ends: episodes terminated early. IAE, ITAE over the episode; overshoot and settling time (2 %) on "
-        "single-step references; ss err: mean |error| over the last 10 % of the episode; limit cycle: "
+        "single-step references; ss err: mean |error| over each episode's own last 10 % (at least one "
+        "step), averaged over the episodes; limit cycle: "
         "share of the episodes (of those long enough to test) whose error oscillates persistently while "
         "the references hold still "
         "(autocorrelation of each stretch of constant reference after its first quarter: at least three "

@@ -106,7 +106,7 @@ def finite_float(value: Any, name: str) -> float:
             result = math.inf
         if math.isfinite(result):
             return result
-    raise ValueError(f"{name} must be a finite number, got {describe(value)}")
+    raise ValueError(f"{name} must be a finite number, got {'null' if value is None else describe(value)}")
 
 
 def check_dt(dt: Any) -> float:
@@ -116,7 +116,7 @@ def check_dt(dt: Any) -> float:
     except ValueError:
         value = math.nan
     if not value > 0:
-        got = boolean_text(dt) if isinstance(dt, bool | np.bool_) else describe(dt)
+        got = boolean_text(dt) if isinstance(dt, bool | np.bool_) else "null" if dt is None else describe(dt)
         raise ValueError(f"dt must be a positive number of seconds, got {got}")
     return value
 

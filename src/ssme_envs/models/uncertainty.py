@@ -20,6 +20,7 @@ import numpy as np
 
 from ssme_envs.models.linear import boolean_text, describe, refuse_non_numbers
 
+_BLOCK_KEYS = frozenset(("parameters", "covariance", "method", "samples", "standard_errors"))
 # Covariances are symmetric positive semi-definite up to round-off; eigenvalues below this
 # fraction of the largest count as zero when drawing.
 PSD_TOL = 1e-9
@@ -103,6 +104,9 @@ class ParameterUncertainty:
         for key in ("parameters", "covariance"):
             if key not in data:
                 raise ValueError(f"{source}: uncertainty lacks {key!r}")
+        extra = sorted(map(str, set(data) - _BLOCK_KEYS))
+        if extra:  # a misspelt key would be dropped without a word
+            raise ValueError(f"{source}: uncertainty: unknown key(s) {', '.join(map(describe, extra))}")
         names = data["parameters"]
         if not isinstance(names, list) or not all(isinstance(v, str) for v in names):
             raise ValueError(f"{source}: uncertainty.parameters must be a list of strings")
