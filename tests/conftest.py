@@ -2,9 +2,17 @@
 
 from __future__ import annotations
 
-import gymnasium as gym
-import numpy as np
-from gymnasium.vector import AutoresetMode
+import os
+
+# One BLAS thread, set before numpy loads its BLAS: the tests' matrices are small, and two
+# threads' synchronisation made some of them several times slower (a bootstrap test 71 s against
+# 11 s). A value the caller set is kept.
+for _name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_name, "1")
+
+import gymnasium as gym  # noqa: E402
+import numpy as np  # noqa: E402
+from gymnasium.vector import AutoresetMode  # noqa: E402
 
 
 def markov(a: np.ndarray, b: np.ndarray, c: np.ndarray, count: int) -> np.ndarray:

@@ -17,8 +17,9 @@ envelope does, and which the rule sizes for):
 
 - nozzle_task.py, of the env's own rule (``h * rate <= ENV_STEP_RATE = 0.25``): the linear and
   the strong joints within 3e-4 of the motion (ENV_CLAIM); Table 1's Bouc-Wen joint within 8e-4
-  on any torque (BOUC_WEN_CLAIM: 3e-4 held only on the PRBS test it was first measured on), joints
-  drawn around it within 1.5e-3 (DRAWN_CLAIM), below the default sensor noise on 3 deg: the kink
+  on any torque (BOUC_WEN_CLAIM: 3e-4 held only on the PRBS test it was first measured on), ten
+  seeded joints drawn around it up to 1.4e-3 (DRAWN_CLAIM), below the default sensor noise on 3
+  deg; a drawn joint can do worse: the kink
   of the Bouc-Wen law at velocity reversals sets RK4's error there, which the rule's rate (the
   natural frequency) does not count. NozzleTVC's docstring says the same in degrees.
 - nozzle_substeps.recommended_substeps, at its default ``step_rate = 0.2``: "about 2e-4" on the
@@ -57,8 +58,9 @@ FULL_SCALE = 3.0e4  # N m, the action's full scale (NozzleTVC docstring)
 ENV_CLAIM = 3e-4  # relative to the motion, the env's rule at h * rate <= 0.25 (nozzle_task.py)
 RULE_CLAIM = 2.5e-4  # "about 2e-4", recommended_substeps at step_rate 0.2, on the PRBS test
 # Where the Bouc-Wen law's kink at velocity reversals sets RK4's error (a rate the rule does not
-# count): Table 1's joint on any torque within 8e-4 of the motion, joints drawn around it within
-# 1.5e-3 (4.5e-3 deg on 3 deg, below the default sensor noise of 1e-4 rad = 5.7e-3 deg)
+# count): Table 1's joint on any torque within 8e-4 of the motion; ten seeded joints drawn around
+# it up to 1.4e-3 (4.3e-3 deg on 3 deg, below the default sensor noise of 1e-4 rad = 5.7e-3 deg),
+# held below DRAWN_CLAIM as a regression bound (a drawn joint can do worse)
 BOUC_WEN_CLAIM = 8e-4
 DRAWN_CLAIM = 1.5e-3
 FEW = settings(max_examples=6, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])
@@ -376,11 +378,11 @@ def test_drawn_strongly_hysteretic_joints_meet_the_claim(joint, kind, seed):
 @given(joint=TABLE1_JOINTS, kind=KINDS, seed=SEEDS)
 def test_drawn_table_1_like_joints_stay_finite_and_need_their_count(joint, kind, seed):
     """Joints around Table 1's (factors as above, n in [0.7, 2.5]): the trajectory stays finite
-    (run_and_compare), within DRAWN_CLAIM, and halving the count costs accuracy."""
+    (run_and_compare) and halving the count costs accuracy. (How accurate the count is on such
+    joints: the seeded ten below, up to 1.4e-3; a drawn joint can exceed that.)"""
     count = built_count(joint)
     actions = signal(joint, kind, seed, horizon(count))
     error, _ = run_and_compare(joint, actions)
-    assert error <= DRAWN_CLAIM
     check_waste(joint, actions, count, error)
 
 

@@ -13,8 +13,7 @@ import numpy as np
 
 from ssme_envs.envs.plant_spread import PlantSpread, covered_joints, resolve_spread
 from ssme_envs.envs.references import Fault, check_reference, normal_rows, reference_signals, uniforms_needed
-from ssme_envs.envs.task import MAX_EPISODE_SECONDS, SYNCED, Carrier, Observation, Value, check_number
-from ssme_envs.models.linear import describe
+from ssme_envs.envs.task import MAX_EPISODE_SECONDS, SYNCED, Carrier, Observation, Value, check_number, shown
 from ssme_envs.models.nozzle import (
     DEFAULT_TORQUE_LIMIT,
     MAX_SUBSTEPS,
@@ -35,8 +34,8 @@ from ssme_envs.models.nozzle import (
 DEG = 180.0 / math.pi
 # RK4 substeps per sample by h * rate <= 0.25 (models.nozzle.recommended_substeps): 3 for Table 1,
 # within 3e-4 of the motion on the PRBS test of experiments/results/nozzle_integration_accuracy.md
-# and within 8e-4 on any torque (2.4e-3 deg on 3 deg, under half the default sensor noise), joints
-# drawn around it within 1.5e-3; the linear and the strong joints within 3e-4
+# and within 8e-4 on any torque (2.4e-3 deg on 3 deg, under half the default sensor noise), ten
+# seeded joints drawn around it up to 1.4e-3; the linear and the strong joints within 3e-4
 # (tests/test_nozzle_integration_references.py, against scipy's solve_ivp). The Bouc-Wen law's
 # kink at velocity reversals, which the rate (the natural frequency) does not count, sets the
 # error of the hysteretic joints: 4 substeps are not better on every torque.
@@ -110,8 +109,7 @@ def resolve_nozzle(plant: str | Path | NozzleParameters | NozzleModel) -> tuple[
     if isinstance(plant, str | Path) and str(plant).endswith(".json"):
         return NozzleModel.load(plant).plant(), "table1"
     raise ValueError(
-        f"plant must be one of {', '.join(PLANTS)}, a nozzle model.json path or a model, "
-        f"got {describe(plant)}"
+        f"plant must be one of {', '.join(PLANTS)}, a nozzle model.json path or a model, got {shown(plant)}"
     )
 
 
@@ -207,7 +205,7 @@ class NozzleTask:
         if substeps is None:  # the worst joint the spread can draw (its corners) sets the count
             substeps = rule_substeps(joints, envelope)
         elif not isinstance(substeps, int) or isinstance(substeps, bool) or not 1 <= substeps <= MAX_SUBSTEPS:
-            raise ValueError(f"substeps must be an integer in 1-{MAX_SUBSTEPS}, got {describe(substeps)}")
+            raise ValueError(f"substeps must be an integer in 1-{MAX_SUBSTEPS}, got {shown(substeps)}")
         else:  # the caller's count: accuracy is theirs, stability is checked
             for joint in joints:
                 check_stable_substeps(joint, substeps, NOZZLE_DT, envelope, DEFAULT_TORQUE_LIMIT)

@@ -26,7 +26,6 @@ import numpy as np
 
 from ssme_envs.envs.references import normal_rows
 from ssme_envs.envs.task import check_number, real_number, shown
-from ssme_envs.models.linear import describe
 from ssme_envs.models.nozzle_joint import NozzleParameters, RK4Parameters, rk4_parameters
 from ssme_envs.models.nozzle_model import NozzleModel
 from ssme_envs.models.uncertainty import PSD_TOL
@@ -66,7 +65,7 @@ class PlantSpread:
     def relative_spread(cls, joint: NozzleParameters, spread: float) -> PlantSpread:
         """Independent log-normal factors ``exp(spread z)`` on J, b, k_el, k_hys, beta_n, gamma_n."""
         if not 0.0 < spread <= MAX_RELATIVE_SPREAD:
-            raise ValueError(f"plant_spread must be in (0, {MAX_RELATIVE_SPREAD:g}], got {describe(spread)}")
+            raise ValueError(f"plant_spread must be in (0, {MAX_RELATIVE_SPREAD:g}], got {shown(spread)}")
         root = np.zeros((len(NAMES), len(RELATIVE)))
         for j, name in enumerate(RELATIVE):
             root[NAMES.index(name), j] = spread
@@ -195,7 +194,7 @@ def resolve_spread(
         return None
     if isinstance(plant_spread, str):
         if plant_spread != "uncertainty":
-            raise ValueError(f"plant_spread must be a number or 'uncertainty', got {describe(plant_spread)}")
+            raise ValueError(f"plant_spread must be a number or 'uncertainty', got {shown(plant_spread)}")
         return PlantSpread.from_model(joint, _model_of(plant), scale)
     spread = real_number(plant_spread)  # numpy numbers as floats; an int too large for one is inf
     if spread is None or not math.isfinite(spread):
@@ -214,7 +213,7 @@ def _model_of(plant: Any) -> NozzleModel:
         return NozzleModel.load(plant)
     raise ValueError(
         f"plant_spread='uncertainty' needs plant='identified', 'strong_identified', a model.json or a "
-        f"model (whose covariance it draws from), got plant={describe(plant)}"
+        f"model (whose covariance it draws from), got plant={shown(plant)}"
     )
 
 
