@@ -128,16 +128,6 @@ ENGINE_CASES = {
 }
 
 
-@pytest.mark.parametrize(("path", "value", "message"), ENGINE_CASES.values(), ids=ENGINE_CASES)
-def test_engine_model_values_that_are_no_numbers(tmp_path, path, value, message):
-    doc = json.loads(DATA.joinpath(ENGINE_FILES[3]).read_text())
-    _set(doc, path, value)
-    file = tmp_path / "model.json"
-    file.write_text(json.dumps(doc))
-    with pytest.raises(ValueError, match=re.escape(f"{file}: {message}")):
-        AlphaCanonicalModel.load(file)
-
-
 NOZZLE_CASES = {
     "A": (("linear", "A", 0, 1), True, "linear.A[0][1] is a boolean (true), not a number"),
     "K": (("linear", "K", 1, 0), False, "linear.K[1][0] is a boolean (false), not a number"),
@@ -163,14 +153,19 @@ NOZZLE_CASES = {
 }
 
 
-@pytest.mark.parametrize(("path", "value", "message"), NOZZLE_CASES.values(), ids=NOZZLE_CASES)
-def test_nozzle_model_values_that_are_no_numbers(tmp_path, path, value, message):
-    doc = json.loads(DATA.joinpath(NOZZLE_FILES[0]).read_text())
+@pytest.mark.parametrize(
+    ("name", "path", "value", "message"),
+    [(ENGINE_FILES[3], *case) for case in ENGINE_CASES.values()]
+    + [(NOZZLE_FILES[0], *case) for case in NOZZLE_CASES.values()],
+    ids=[f"engine-{key}" for key in ENGINE_CASES] + [f"nozzle-{key}" for key in NOZZLE_CASES],
+)
+def test_model_values_that_are_no_numbers(tmp_path, name, path, value, message):
+    doc = json.loads(DATA.joinpath(name).read_text())
     _set(doc, path, value)
-    file = tmp_path / "nozzle.json"
+    file = tmp_path / name
     file.write_text(json.dumps(doc))
     with pytest.raises(ValueError, match=re.escape(f"{file}: {message}")):
-        NozzleModel.load(file)
+        _load(name)(file)
 
 
 def test_the_cli_refuses_a_boolean_in_a_plant_file_on_one_line(tmp_path, capsys):

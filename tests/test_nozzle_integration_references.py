@@ -348,17 +348,22 @@ def check_waste(p: NozzleParameters, actions: np.ndarray, count: int, error: flo
     assert half_error > ENV_CLAIM / 10, (count, error, half_error)
 
 
+def check_drawn(joint: NozzleParameters, kind: str, seed: int, claim: float) -> None:
+    """The env's count on ``joint``: finite, within ``claim``, and not wasteful (check_waste)."""
+    count = built_count(joint)
+    actions = signal(joint, kind, seed, horizon(count))
+    error, _ = run_and_compare(joint, actions)
+    assert error <= claim
+    check_waste(joint, actions, count, error)
+
+
 @FEW
 @given(joint=LINEAR_JOINTS, kind=KINDS, seed=SEEDS)
 def test_drawn_linear_joints_meet_the_claim_and_need_their_count(joint, kind, seed):
     """Linear joints around Table 1's and the strong nozzle's (J, b, k each within plant_spread's
     largest factors): finite, within ENV_CLAIM at the env's count, and worse at half of it.
     Measured: <= 1e-4 at the count; 3e-4 to 8e-3 at half."""
-    count = built_count(joint)
-    actions = signal(joint, kind, seed, horizon(count))
-    error, _ = run_and_compare(joint, actions)
-    assert error <= ENV_CLAIM
-    check_waste(joint, actions, count, error)
+    check_drawn(joint, kind, seed, ENV_CLAIM)
 
 
 @FEW
@@ -367,11 +372,7 @@ def test_drawn_strongly_hysteretic_joints_meet_the_claim(joint, kind, seed):
     """Joints around the strong nozzle (plant_spread's factors on J, b, a k, (1 - a) k, beta,
     gamma; n in [1, 2.5]): finite and within ENV_CLAIM at the env's count (which the stability
     rule sets for most of them; measured <= 1.5e-4)."""
-    count = built_count(joint)
-    actions = signal(joint, kind, seed, horizon(count))
-    error, _ = run_and_compare(joint, actions)
-    assert error <= ENV_CLAIM
-    check_waste(joint, actions, count, error)
+    check_drawn(joint, kind, seed, ENV_CLAIM)
 
 
 @FEW
@@ -380,10 +381,7 @@ def test_drawn_table_1_like_joints_stay_finite_and_need_their_count(joint, kind,
     """Joints around Table 1's (factors as above, n in [0.7, 2.5]): the trajectory stays finite
     (run_and_compare) and halving the count costs accuracy. (How accurate the count is on such
     joints: the seeded ten below, up to 1.4e-3; a drawn joint can exceed that.)"""
-    count = built_count(joint)
-    actions = signal(joint, kind, seed, horizon(count))
-    error, _ = run_and_compare(joint, actions)
-    check_waste(joint, actions, count, error)
+    check_drawn(joint, kind, seed, math.inf)
 
 
 def seeded_table1_joints(count: int) -> list[NozzleParameters]:
