@@ -27,7 +27,9 @@ class NozzleTVCEnv(TrackingEnv):
     (:func:`~ssme_envs.models.nozzle.stiff_rates`).
     A plant that needs more than 10,000 substeps per step is refused with a ValueError naming
     the rate and its parameters; so is a ``substeps`` argument below the stability rule's count.
-    The actuator lag and rate limit act once per step, exactly: they need no substeps.
+    The actuator lag and rate limit act once per step, exactly: they need no substeps (the torque
+    held over a step is the lag's value at the step's end, ``e tau_(k-1) + (1 - e) u_k`` with
+    ``e = exp(-dt / actuator_lag)``, then limited to ``rate_limit dt`` of change).
 
     ## Action Space
     ``Box(-1, 1, (1,), float32)``: the torque command as a fraction of the actuator's full scale

@@ -180,7 +180,8 @@ def _accumulate_rows(table: np.ndarray, operation: np.ufunc = np.add) -> None:
 class Fault:
     """A fault injected at a given time.
 
-    kind : "stuck_valve" (valve ``index`` holds its command from ``time`` on), "sensor_bias"
+    kind : "stuck_valve" (valve ``index`` holds, from ``time`` on, the command of the first step
+        at or after ``round(time / dt)``), "sensor_bias"
         (output ``index`` reads ``magnitude`` too high, normalized units), or "gain_loss"
         (valve ``index`` moves only ``magnitude`` times its command).
     time : s after reset.
