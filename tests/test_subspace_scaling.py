@@ -172,3 +172,18 @@ def test_two_outputs_of_very_different_units(spread):
     assert result.order == poles.size
     assert pole_error(poles, result.model.poles()) < 1e-9
     assert response_error(result.model, system, 1.0 / u_rms, y_scale / y_rms) < 1e-9
+
+
+@settings(deadline=None, max_examples=10)
+@given(seed=SEEDS, k=st.floats(-40.0, -12.0), channel=st.sampled_from(["u", "y"]))
+def test_a_channel_in_tiny_units_is_data_not_a_constant(seed, k, channel):
+    """A channel whose values are all below 1e-12 (units 1e12 to 1e40 times too large) varies
+    as much as any other relative to its own size: it is identified, not refused as constant."""
+    system, u, y, u_rms, y_rms = unit_record(seed, 1, 1, noise=0.0)
+    u_scale, y_scale = (
+        np.array([10.0**k if channel == "u" else 1.0]),
+        np.array([10.0**k if channel == "y" else 1.0]),
+    )
+    result = dsr_e(u * u_scale, y * y_scale, 1.0)
+    assert pole_error(system[4], result.model.poles()) < 1e-9
+    assert response_error(result.model, system, u_scale / u_rms, y_scale / y_rms) < 1e-9
