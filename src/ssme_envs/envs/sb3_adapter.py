@@ -32,6 +32,7 @@ from stable_baselines3.common.env_util import is_wrapped
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices, VecEnvStepReturn
 
 from ssme_envs.envs.inputs import check_seed
+from ssme_envs.envs.sub_env import sub_env_index
 
 FINAL_KEYS = ("final_obs", "_final_obs", "final_info", "_final_info")
 
@@ -152,13 +153,7 @@ class SB3VecEnv(VecEnv):
         end as in a list), checked."""
         if indices is None:  # every sub-env: nothing to check
             return list(self._sub_envs)
-        chosen = list(self._get_indices(indices))
-        for i in chosen:
-            if isinstance(i, bool | np.bool_) or not isinstance(i, int | np.integer):
-                raise TypeError(f"indices must be sub-env numbers (ints), got {i!r}")
-            if not -self.num_envs <= i < self.num_envs:
-                raise IndexError(f"sub-env index {i} out of range for {self.num_envs} sub-envs")
-        return [self._sub_envs[i] for i in chosen]
+        return [self._sub_envs[sub_env_index(i, self.num_envs)] for i in self._get_indices(indices)]
 
 
 def _sub_info(info: dict[str, Any], i: int) -> dict[str, Any]:

@@ -16,6 +16,16 @@ if TYPE_CHECKING:
 RESET_OPTIONS = {"reset_mask": "a numpy bool array of shape (num_envs,), at least one True"}
 
 
+def sub_env_index(index: Any, num_envs: int) -> int:
+    """``index`` as a sub-env number in ``[0, num_envs)``: an int (Python's or numpy's, not a
+    bool), negative ones counted from the end as in a list; TypeError or IndexError otherwise."""
+    if isinstance(index, bool | np.bool_) or not isinstance(index, int | np.integer):
+        raise TypeError(f"indices must be sub-env numbers (ints), got {index!r}")
+    if not -num_envs <= index < num_envs:
+        raise IndexError(f"sub-env index {index} out of range for {num_envs} sub-envs")
+    return int(index) % num_envs
+
+
 def reset_mask(options: Any, num_envs: int, name: str) -> np.ndarray | None:
     """The checked ``reset_mask`` of a vector env's reset options, or None (every sub-env); the
     errors of ``SyncVectorEnv`` for a bad mask, and the scalar env's for other options."""

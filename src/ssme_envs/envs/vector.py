@@ -14,7 +14,6 @@ from __future__ import annotations
 import copy
 import dataclasses
 import math
-import operator
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -29,7 +28,7 @@ from ssme_envs.envs.engine_throttle import ThrottleTask
 from ssme_envs.envs.inputs import batch_actions, check_seeds, check_vector_memory, positive_int
 from ssme_envs.envs.launcher_pitch import LauncherTask
 from ssme_envs.envs.nozzle_task import NozzleTask
-from ssme_envs.envs.sub_env import SubEnv, reset_mask
+from ssme_envs.envs.sub_env import SubEnv, reset_mask, sub_env_index
 from ssme_envs.envs.task import CLIP_UFUNC, GATHER, SYNCED, adopt, next_stop, set_columns, transpose_into
 from ssme_envs.envs.tracking_env import EpisodeOverError
 
@@ -158,10 +157,7 @@ class TrackingVectorEnv(VectorEnv):
 
     def sub_env(self, index: int) -> SubEnv:
         """The view of sub-env ``index`` (negative counts from the end): see :class:`SubEnv`."""
-        i = operator.index(index)
-        if not -self.num_envs <= i < self.num_envs:
-            raise IndexError(f"sub-env index {index} out of range for {self.num_envs} sub-envs")
-        return SubEnv(self, i % self.num_envs)
+        return SubEnv(self, sub_env_index(index, self.num_envs))
 
     def single_spec(self) -> gym.envs.registration.EnvSpec | None:
         """The spec that makes one sub-env with ``gymnasium.make`` (None if this env has no

@@ -91,6 +91,14 @@ def refuse_non_numbers(value: Any, name: str) -> None:
         raise ValueError(f"{name}{''.join(f'[{i}]' for i in index)} is {what}, not a number")
 
 
+def refuse_unknown_keys(block: Any, known: Any, where: str, hint: str = "") -> None:
+    """ValueError naming the keys of the file's object ``block`` outside ``known`` (a misspelt
+    key would otherwise be dropped without a word): ``"{where}unknown key(s) 'x', 'y'{hint}"``."""
+    unknown = sorted(map(str, set(block) - set(known)))
+    if unknown:
+        raise ValueError(f"{where}unknown key(s) {', '.join(map(describe, unknown))}{hint}")
+
+
 def finite_float(value: Any, name: str) -> float:
     """``value`` as a float, or ValueError naming ``name`` unless it is a finite real number.
 
@@ -241,4 +249,5 @@ __all__ = [
     "finite_float",
     "non_number_at",
     "refuse_non_numbers",
+    "refuse_unknown_keys",
 ]

@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from ssme_envs.models.linear import describe, finite_float
+from ssme_envs.models.linear import describe, finite_float, refuse_unknown_keys
 from ssme_envs.models.nozzle_joint import NozzleParameters
 from ssme_envs.models.statespace import as_matrix, dumps_compact, read_json
 from ssme_envs.models.uncertainty import ParameterUncertainty, check_standard_errors
@@ -19,6 +19,7 @@ NOZZLE_MODEL_SCHEMA = "ssme-envs/nozzle-model"
 NOZZLE_MODEL_SCHEMA_VERSION = 2
 _READABLE_VERSIONS = (1, 2)
 _LINEAR_MATRICES = ("A", "B", "C", "D", "K")
+_LINEAR_KEYS = (*_LINEAR_MATRICES, "dt", "J", "b", "k")  # besides an optional "uncertainty"
 _TOP_KEYS = frozenset(("schema", "schema_version", "input_name", "output_name", "linear", "bouc_wen", "fit"))
 LINEAR_UNCERTAIN = ("J", "b", "k")
 BOUC_WEN_UNCERTAIN = ("J", "b", "k_el", "k_hys", "beta_n", "gamma_n", "n")
@@ -90,7 +91,7 @@ class NozzleModel:
             raise ValueError(
                 "linear: give the covariance as linear_uncertainty, not a linear['uncertainty'] entry"
             )
-        missing = [key for key in (*_LINEAR_MATRICES, "dt", "J", "b", "k") if key not in lin]
+        missing = [key for key in _LINEAR_KEYS if key not in lin]
         if missing:
             raise ValueError(f"linear: missing key(s) {', '.join(missing)}")
         a = as_matrix(lin["A"], "linear.A", (None, None))
@@ -155,13 +156,9 @@ class NozzleModel:
             )
         if not isinstance(data.get("linear"), dict):
             raise ValueError(f"{source}: 'linear' must be an object with A, B, C, D, K, dt, J, b, k")
-        unknown = sorted(map(str, set(data) - _TOP_KEYS))
-        if unknown:  # a misspelt key would otherwise be dropped without a word
-            raise ValueError(f"{source}: unknown key(s) {', '.join(map(describe, unknown))}")
+        refuse_unknown_keys(data, _TOP_KEYS, f"{source}: ")
         linear = dict(data["linear"])
-        unknown = sorted(map(str, set(linear) - {*_LINEAR_MATRICES, "dt", "J", "b", "k", "uncertainty"}))
-        if unknown:
-            raise ValueError(f"{source}: linear: unknown key(s) {', '.join(map(describe, unknown))}")
+        refuse_unknown_keys(linear, (*_LINEAR_KEYS, "uncertainty"), f"{source}: linear: ")
         bw = data.get("bouc_wen")
         uncertainty: dict[str, ParameterUncertainty | None] = {"linear": None, "bouc_wen": None}
         try:
@@ -177,9 +174,7 @@ class NozzleModel:
                     uncertainty["bouc_wen"] = _read_uncertainty(
                         bw.pop("uncertainty"), BOUC_WEN_UNCERTAIN, "bouc_wen"
                     )
-                unknown = sorted(set(bw) - set(NozzleParameters.__dataclass_fields__))
-                if unknown:
-                    raise ValueError(f"bouc_wen: unknown key(s) {', '.join(unknown)}")
+                refuse_unknown_keys(bw, NozzleParameters.__dataclass_fields__, "bouc_wen: ")
                 missing = sorted(set(NozzleParameters.__dataclass_fields__) - set(bw))
                 if missing:
                     raise ValueError(f"bouc_wen: missing key(s) {', '.join(missing)}")

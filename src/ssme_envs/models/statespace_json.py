@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ssme_envs.input_files import FileTooLarge, NotRegularFile, read_bounded
-from ssme_envs.models.linear import describe
+from ssme_envs.models.linear import describe, refuse_unknown_keys
 from ssme_envs.models.uncertainty import ParameterUncertainty, check_standard_errors
 
 if TYPE_CHECKING:
@@ -69,12 +69,8 @@ def engine_model_from_dict(
             f"{source}: unsupported schema_version {describe(version)} "
             f"(expected one of {list(SUPPORTED_ENGINE_SCHEMA_VERSIONS)})"
         )
-    unknown = sorted(map(str, set(data) - _ENGINE_KEYS))
-    if unknown:  # a misspelt key, or a D the alpha-canonical engine has not, would be dropped
-        raise ValueError(
-            f"{source}: unknown key(s) {', '.join(map(describe, unknown))} (an engine model holds "
-            f"{', '.join(sorted(_ENGINE_KEYS))}; it has no feedthrough D)"
-        )
+    hint = f" (an engine model holds {', '.join(sorted(_ENGINE_KEYS))}; it has no feedthrough D)"
+    refuse_unknown_keys(data, _ENGINE_KEYS, f"{source}: ", hint)
     missing = [k for k in ("dt", "A", "B", "C", "observability_indices", "lambda") if k not in data]
     if missing:
         raise ValueError(f"{source}: missing key(s) {', '.join(missing)}")

@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from ssme_envs.models.linear import boolean_text, describe, refuse_non_numbers
+from ssme_envs.models.linear import boolean_text, describe, refuse_non_numbers, refuse_unknown_keys
 
 _BLOCK_KEYS = frozenset(("parameters", "covariance", "method", "samples", "standard_errors"))
 # Covariances are symmetric positive semi-definite up to round-off; eigenvalues below this
@@ -104,9 +104,7 @@ class ParameterUncertainty:
         for key in ("parameters", "covariance"):
             if key not in data:
                 raise ValueError(f"{source}: uncertainty lacks {key!r}")
-        extra = sorted(map(str, set(data) - _BLOCK_KEYS))
-        if extra:  # a misspelt key would be dropped without a word
-            raise ValueError(f"{source}: uncertainty: unknown key(s) {', '.join(map(describe, extra))}")
+        refuse_unknown_keys(data, _BLOCK_KEYS, f"{source}: uncertainty: ")
         names = data["parameters"]
         if not isinstance(names, list) or not all(isinstance(v, str) for v in names):
             raise ValueError(f"{source}: uncertainty.parameters must be a list of strings")
