@@ -34,8 +34,8 @@ from ssme_envs.models.nozzle import (
 DEG = 180.0 / math.pi
 # RK4 substeps per sample by h * rate <= 0.25 (models.nozzle.recommended_substeps): 3 for Table 1,
 # within 3e-4 of the motion on the PRBS test of experiments/results/nozzle_integration_accuracy.md
-# and within 8e-4 on any torque (2.4e-3 deg on 3 deg, under half the default sensor noise), ten
-# seeded joints drawn around it up to 1.4e-3; the linear and the strong joints within 3e-4
+# and within half the default sensor noise (1e-4 rad) on 3 deg motions under any torque, ten
+# seeded joints drawn around it within the sensor noise; the linear and the strong joints within 3e-4
 # (tests/test_nozzle_integration_references.py, against scipy's solve_ivp). The Bouc-Wen law's
 # kink at velocity reversals, which the rate (the natural frequency) does not count, sets the
 # error of the hysteretic joints: 4 substeps are not better on every torque.

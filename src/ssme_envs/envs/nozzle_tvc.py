@@ -16,8 +16,8 @@ class NozzleTVCEnv(TrackingEnv):
     The plant is the movable nozzle of the VLS launcher's first stage: ``J x'' + b x' + F = tau``
     with the flexible joint's restoring torque F hysteretic (Bouc-Wen, Table 1 of the nozzle
     paper) by default, or linear, or any nozzle model.json; RK4 with ``substeps`` per 0.008 s step
-    (3 for Table 1's joint: within 8e-4 of the motion, 2.4e-3 deg on 3 deg, of a fine-step
-    simulation on any torque, tested). Angles in degrees.
+    (3 for Table 1's joint: within half the default sensor noise of a fine-step simulation on
+    3 deg motions under any torque, tested). Angles in degrees.
 
     The substep count is computed once per plant
     (:func:`~ssme_envs.models.nozzle.integration_substeps`): the larger of an accuracy rule

@@ -51,7 +51,8 @@ def recommended_substeps(
     w_max`` with ``w_max = (beta_n + gamma_n)^(-1/n)``: large beta + gamma make the z equation
     stiff. The default 0.2 keeps the angle within about 2e-4 of a fine reference for Table 1's
     nozzle and for a strongly hysteretic one on a +-3 deg PRBS
-    (experiments/results/nozzle_integration_accuracy.md), Table 1's within 8e-4 on other torques:
+    (experiments/results/nozzle_integration_accuracy.md), Table 1's within half the default
+    sensor noise (1e-4 rad on 3 deg) on other torques:
     the sign switch of the Bouc-Wen law at velocity reversals, which ``rate`` does not count,
     limits RK4 to about second order there.
 
