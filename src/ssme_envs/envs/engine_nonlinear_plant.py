@@ -1,7 +1,7 @@
 """The nonlinear engine truth as the plant of the engine environments (``plant="nonlinear"``).
 
 :class:`NonlinearPlantCore` steps :class:`~ssme_envs.models.engine_nonlinear.NonlinearEngine`
-(its valve flow curve, and its Table I parameters and trim scheduled on the power implied by its
+(its valve authority and flow curve, and its Table I parameters and trim scheduled on the power implied by its
 own chamber pressure) behind the valve backlash and stiction of the truth, on both carriers of
 :mod:`ssme_envs.envs.task`: Python floats for one env and (N,) rows for a batch, the same IEEE
 operations in the same order, so that an env gives the same bits alone and in a batch. The
@@ -27,19 +27,18 @@ import numpy as np
 
 from ssme_envs.envs.task import CLIP_UFUNC, Carrier, Value
 from ssme_envs.models.engine_nonlinear import (
-    FLOW_AMPLITUDE,
     GRID_STEP,
     PC_PER_PERCENT,
     SCHEDULE_RANGE,
     NonlinearEngine,
 )
 from ssme_envs.models.engine_step import dynamics_arrays, valves_arrays, valves_pair_floats
+from ssme_envs.models.engine_valve_flow import valve_effect
 
 if TYPE_CHECKING:
     from ssme_envs.envs.engine_task import EngineTask
 
 PLANT_NAME = "nonlinear"  # the plant option that selects the nonlinear engine
-_S1 = math.sqrt(2.0) - 1.0  # the flow curve's s(1), as the model module computes it
 
 
 class NonlinearPlant(NamedTuple):
@@ -176,11 +175,10 @@ class NonlinearPlantCore:
         e = [xi - qi for xi, qi in zip(x, x_eq, strict=True)]
         o0, o1 = self.input_offset
         d0, d1 = (v0 + o0) - q0, (v1 + o1) - q1
-        if self.asymmetric:
-            a = FLOW_AMPLITUDE
-            z0, z1 = d0 / a, d1 / a
-            d0 = a * (z0 + (g0 - 1.0) * (math.sqrt(1.0 + z0 * z0) - 1.0) / _S1)
-            d1 = a * (z1 + (g1 - 1.0) * (math.sqrt(1.0 + z1 * z1) - 1.0) / _S1)
+        engine, asymmetric = self.engine, self.asymmetric
+        loss, travel = engine.authority_loss, engine.authority_travel
+        d0 = valve_effect(d0, g0, math.sqrt, asymmetric, loss, travel)
+        d1 = valve_effect(d1, g1, math.sqrt, asymmetric, loss, travel)
         y0, y1 = e[n - 2], e[n - 1]
         x = [
             (((e[src] + (k_vals[2 * i] * y0 + k_vals[2 * i + 1] * y1)) if src >= 0
@@ -211,10 +209,9 @@ class NonlinearPlantCore:
         x_eq = vals[cols["x_eq"]]
         e = x - x_eq
         d = (valve + self.input_column) - vals[cols["v_eq"]]
-        if self.asymmetric:
-            a = FLOW_AMPLITUDE
-            z = d / a
-            d = a * (z + (vals[cols["lam"]] - 1.0) * (np.sqrt(1.0 + z * z) - 1.0) / _S1)
+        engine = self.engine
+        d = valve_effect(d, vals[cols["lam"]], np.sqrt, self.asymmetric, engine.authority_loss,
+                         engine.authority_travel)  # fmt: skip
         k_gain = vals[cols["K"]].reshape(n, 2, count)
         b_gain = vals[cols["B"]].reshape(n, 2, count)
         x = dynamics_arrays(e, d, self.shift_source, k_gain, b_gain)

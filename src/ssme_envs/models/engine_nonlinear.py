@@ -42,28 +42,18 @@ the map is at rest, and its Jacobian is ``dx+/dx = A(P)``, ``dx+/dv = B(P)`` and
 (I - A) x_eq' - B v_eq' = 0`` (the trim equations above make it so): the schedule is invisible
 to first order and the linearization's Markov parameters ``C A^k B`` are Table I's.
 
-**Valve flow characteristic.** ``phi`` maps a valve's departure ``d`` from its nominal position
-at the current power to its effect on the engine, per valve::
-
-    phi(d) = d + (lambda - 1) a s(d / a) / s(1),   s(z) = sqrt(1 + z^2) - 1,   a = 0.01.
-
-**What Table I's B and lambda mean here.** Eq 36 gives the response to a +-a binary input
-the up and down gains ``lambda B`` and ``(2 - lambda) B``; their mean ``B`` is the gain of
-the symmetric part, and ``C A^k B`` are Table I's Markov parameters. ``phi`` has slope 1 at
-``d = 0``, so the Jacobian's B (a symmetric derivative) is Table I's B, and curvature
-``phi''(0) = (lambda - 1) / (a (sqrt 2 - 1))``, chosen so that the chords to ``d = +-a`` have
-exactly the gains ``lambda`` and ``2 - lambda``: on a +-0.01 PRBS the curve acts as eq 36's
-``u + (lambda - 1)|u|``. B is the flow curve's slope, lambda - 1 its curvature times
-``a (sqrt 2 - 1)``. Away from the trim the curve tends to straight lines of slopes
-``1 +- (lambda - 1) / (sqrt 2 - 1)``; it is monotone while ``|lambda - 1| < sqrt 2 - 1``
-(checked; at most 0.36 over 62.5-115 %). Larger inputs see more asymmetry than eq 36 predicts
-(at +-0.02 the chord gain is ``1 + 1.49 (lambda - 1)``), smaller ones less (the curve is
-smooth where eq 36 has a kink): that and the schedule are what an identified point model
-misses. Valve travel is not limited.
+**Valve effect.** ``phi(psi(d))`` maps a valve's departure ``d`` from its nominal position at
+the current power to its effect on the engine, per valve (:mod:`ssme_envs.models.engine_valve_flow`
+states both curves and what they assume): ``psi``, the valve's authority, slope 1 at the trim and
+falling symmetrically away from it (calibrated, ``authority_loss=0`` removes it); ``phi``, the flow
+curve, slope 1 at the trim and curved so that its chords to +-0.01 are Table I's asymmetric gains
+``lambda`` and ``2 - lambda``. Both have slope 1 at ``d = 0``, so the Jacobian's B is Table I's;
+the schedule and both curves are what an identified point model misses.
 
 **Valve hardware and sensors.** The linkage backlash, valve stiction and sensor noise of
 :class:`~ssme_envs.models.engine.TruthConfig` act on the valve command deviations as in the
-linear truth; ``asymmetric_gains=False`` makes ``phi`` the identity.
+linear truth; ``asymmetric_gains=False`` makes ``phi`` the identity (``psi`` stays: it is the
+engine's).
 """
 
 from __future__ import annotations
@@ -81,36 +71,23 @@ from ssme_envs.models.engine import (
     with_sensor_noise,
 )
 from ssme_envs.models.engine_step import valves_arrays
+from ssme_envs.models.engine_valve_flow import (
+    AUTHORITY_LOSS,
+    AUTHORITY_TRAVEL,
+    FLOW_AMPLITUDE,
+    check_authority,
+    flow_characteristic,
+    valve_effect,
+)
 from ssme_envs.models.statespace import AlphaCanonicalModel
 
 SCHEDULE_RANGE = (62.5, 115.0)  # %, saturation of the scheduling variable
 OPERATING_RANGE = (65.0, 110.0)  # %, accepted operating points
-FLOW_AMPLITUDE = 0.01  # normalized valve travel at which phi's chords are lambda and 2 - lambda
 DEFAULT_SCHEDULE_LAG = 0.0  # s, time constant of the scheduling variable (0: none)
 PC_PER_PERCENT = 0.01  # normalized Pc per % of power
 GRID_STEP = 0.25  # %, node spacing of the parameter and trim tables
 _GAUSS = np.polynomial.legendre.leggauss(6)
 _S1 = np.sqrt(2.0) - 1.0  # s(1)
-
-
-def flow_characteristic(d: np.ndarray, lam: np.ndarray, amplitude: float = FLOW_AMPLITUDE) -> np.ndarray:
-    """Valve effect ``phi(d) = d + (lambda - 1) a s(d/a) / s(1)``, ``s(z) = sqrt(1 + z^2) - 1``.
-
-    Parameters
-    ----------
-    d : array, shape (..., m)
-        Valve departures from the nominal position, normalized valve travel.
-    lam : array, shape (..., m) or (m,)
-        Asymmetric gains: the chord gains to ``+-amplitude`` are ``lam`` and ``2 - lam``.
-    amplitude : float
-        ``a``, normalized valve travel.
-
-    Returns
-    -------
-    ndarray, same shape as ``d``: the effect, in the units of the valve travel (slope 1 at 0).
-    """
-    z = np.asarray(d, dtype=float) / amplitude
-    return amplitude * (z + (np.asarray(lam, dtype=float) - 1.0) * (np.sqrt(1.0 + z * z) - 1.0) / _S1)
 
 
 @dataclass(frozen=True)
@@ -141,6 +118,9 @@ class NonlinearEngine:
         Their power levels, %, increasing (default 70, 80, 90, 100, 110).
     tau : float
         Time constant of the scheduling variable, s (0: it follows Pc without lag).
+    authority_loss, authority_travel : float
+        ``g`` (in [0, 1)) and ``b`` (normalized valve travel) of the valve authority ``psi``
+        (:mod:`ssme_envs.models.engine_valve_flow`); ``authority_loss=0`` removes it.
     """
 
     def __init__(
@@ -148,6 +128,8 @@ class NonlinearEngine:
         models: Sequence[AlphaCanonicalModel] | None = None,
         powers: Sequence[float] | None = None,
         tau: float = DEFAULT_SCHEDULE_LAG,
+        authority_loss: float = AUTHORITY_LOSS,
+        authority_travel: float = AUTHORITY_TRAVEL,
     ) -> None:
         if models is None:
             models, powers = [published_model(p) for p in POWER_LEVELS], POWER_LEVELS
@@ -165,6 +147,7 @@ class NonlinearEngine:
                 raise ValueError("the point models must have C = [0 I] (H = I)")
         if not (np.isfinite(tau) and tau >= 0):
             raise ValueError(f"tau must be a time constant >= 0 s, got {tau!r}")
+        self.authority_loss, self.authority_travel = check_authority(authority_loss, authority_travel)
         self.template = first
         self.dt = first.dt
         self.tau = float(tau)
@@ -305,12 +288,13 @@ class NonlinearEngine:
     ) -> tuple[np.ndarray, np.ndarray]:
         """One sample of N engines: states x (N, n), schedule rho (N,) %, valves v (N, m).
 
-        Returns (x, rho) at the next sample. ``asymmetric=False`` makes the flow curve linear.
+        Returns (x, rho) at the next sample. ``asymmetric=False`` makes the flow curve linear
+        (the valve authority stays).
         """
         tab = self.table(rho)
         e = x - tab["x_eq"]
         d = v - tab["v_eq"]
-        flow = flow_characteristic(d, tab["lam"]) if asymmetric else d
+        flow = valve_effect(d, tab["lam"], np.sqrt, asymmetric, self.authority_loss, self.authority_travel)
         x_next = tab["x_eq"] + e @ self.shift.T
         x_next += np.einsum("nij,nj->ni", tab["K"], e[:, self.layout.n - self.layout.p :])
         x_next += np.einsum("nij,nj->ni", tab["B"], flow)
@@ -375,3 +359,11 @@ def simulate_nonlinear(
         x, rho = engine.step(x, rho, v_trim + valve.T, config.asymmetric_gains)
     measured = with_sensor_noise(clean, noise, rng)
     return (measured[0], clean[0]) if single else (measured, clean)
+
+
+__all__ = [
+    "FLOW_AMPLITUDE",
+    "NonlinearEngine",
+    "flow_characteristic",
+    "simulate_nonlinear",
+]
