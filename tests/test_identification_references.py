@@ -365,7 +365,8 @@ RECORDS = {"validation_prbs": "prbs", "validation_low_frequency": "low_frequency
 @pytest.mark.parametrize("power", LEVELS)
 def test_nonlinear_pipeline_beats_table_ii(nonlinear_results, power):
     """Our model's and filter's SEE on the nonlinear truth's validation records below the paper's
-    (Table II) at the same level, record and output. Measured: 2-20 times below."""
+    (Table II) at the same level, record and output. Measured: 1.2-90 times below (the figure 3
+    model SEEs, calibrated to the paper's range, closest)."""
     result = nonlinear_results[power]
     model = result.identified.model
     for record, key in RECORDS.items():
@@ -376,6 +377,19 @@ def test_nonlinear_pipeline_beats_table_ii(nonlinear_results, power):
             assert np.all(values < paper), (record, kind, values, paper)
             # the pipeline reports the same SEE
             np.testing.assert_allclose(result.validation[record][kind]["see"], values, rtol=1e-8, atol=1e-12)
+
+
+@pytest.mark.parametrize("power", LEVELS)
+def test_nonlinear_figure3_model_see_in_the_papers_range(nonlinear_results, power):
+    """The identified point models' SEE on the figure 3 test (as packaged: OPOV within +-0.02,
+    FPOV within +-0.015), computed here by scipy from the record, lies in 0.01-0.2, the range of
+    Table II against Rocketdyne's simulation. The truth's valve authority was calibrated for this
+    (``ssme_envs.models.engine_valve_flow``); without it 5 of the 10 fell below 0.01."""
+    result = nonlinear_results[power]
+    record = result.records["validation_low_frequency"]
+    values = _model_see(result.identified.model, record.u, record.y)
+    assert np.all((values >= 0.01) & (values <= 0.2)), values
+    assert np.abs(record.u).max() == pytest.approx(0.02)
 
 
 def test_table_ii_bound_rejects_a_wrong_model(nonlinear_results):

@@ -67,9 +67,10 @@ class EngineTrackingEnv(TrackingEnv):
     object also serves, e.g. with a schedule lag), started at its trim at ``power``, its
     parameters scheduled on the power implied by its own chamber pressure; the valve effects and
     sensor noise of ``truth`` act as on the linear plant, ``asymmetric_gains=False`` makes its
-    valve flow curve linear, and a controller's ``"truth"`` design model is its linearization at
-    ``power``. truth : TruthConfig or dict (asymmetric_gains, backlash and stiction within 0-0.4
-    valve travel, sensor_noise within 0-0.05 normalized), the effects added to the plant.
+    valve flow curve linear (its valve authority, which falls away from the trim, stays), and a
+    controller's ``"truth"`` design model is its linearization at ``power``. truth : TruthConfig
+    or dict (asymmetric_gains, backlash and stiction within 0-0.4 valve travel, sensor_noise
+    within 0-0.05 normalized), the effects added to the plant.
     reference : "random_steps" (default), "step", "ramp", "prbs", "sine_sweep", "attitude",
     "zero", "mixed" (each episode one of random_steps, step, ramp, sine_sweep, attitude);
     reference_amplitude (normalized, default 0.01).

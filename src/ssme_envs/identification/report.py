@@ -303,11 +303,13 @@ def nonlinear_section(
         f"{seed}, the same PRBS and noise streams) on the synthetic nonlinear engine of "
         "`ssme_envs.models.engine_nonlinear` (EngineTracking-v0 and EngineThrottle-v0 with "
         '`plant="nonlinear"`): Table I interpolated in power and scheduled on the power implied by '
-        "the engine's own chamber pressure, a smooth valve flow curve whose chords on a +-0.01 input "
-        "are eq 36's lambda gains, and the valve backlash, stiction and sensor noise above. It is "
-        "consistent with the paper's published local models (its linearization at each Table I level "
-        "is Table I's model), not Rocketdyne's simulation; the identified models below see what it "
-        "adds: the schedule and the flow curve away from a +-0.01 input.",
+        "the engine's own chamber pressure, a valve authority that falls away from the trim "
+        "(calibrated so that the figure 3 test shows Table II's range of model SEE) and a smooth valve "
+        "flow curve whose chords on a +-0.01 input are close to eq 36's lambda gains, and the valve "
+        "backlash, stiction and sensor noise above. It is consistent with the paper's published local "
+        "models (its linearization at each Table I level is Table I's model), not Rocketdyne's "
+        "simulation; the identified models below see what it adds: the schedule, the authority and the "
+        "flow curve away from a +-0.01 input.",
         "",
         "### Table I: published vs identified on the nonlinear truth",
         "",
