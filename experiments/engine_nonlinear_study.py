@@ -39,7 +39,6 @@ from ssme_envs.models import (
     simulate,
     simulate_nonlinear,
 )
-from ssme_envs.models.engine_valve_flow import valve_authority
 from ssme_envs.models.linear import StateSpace
 from ssme_envs.models.linked import LinkedEngineModel
 from ssme_envs.outputs import save_figure, write_text
@@ -59,17 +58,6 @@ EPISODES, EVAL_SEED = 100, 0
 GAP_SCENARIOS = {TRACKING: (("noise", "nonlinear", 100), ("bucket", "nonlinear_bucket", 67)),
                  THROTTLE: (("mission", "mission_nonlinear", None),)}  # fmt: skip
 SERVO = {TRACKING: "lqi", THROTTLE: "scheduled"}  # the LQ servo of each env (agents.CONTROLLERS)
-AUTHORITY_GRID = (
-    (0.0, 0.015),
-    (0.5, 0.01),
-    (0.5, 0.015),
-    (0.5, 0.02),
-    (0.7, 0.01),
-    (0.7, 0.02),
-    (0.9, 0.01),
-    (0.9, 0.015),
-    (0.9, 0.02),
-)  # (g, b) beside the default, fmt: skip
 
 
 def paper_table2() -> dict:
@@ -135,52 +123,6 @@ def truth_design_difference(engine: NonlinearEngine) -> float:
         markov_difference(engine.linear_model(power), linked.local_model(power))
         for power in range(65, 110, 4)
     )
-
-
-def authority_section(engine: NonlinearEngine, paper: dict) -> list[str]:
-    """The calibration of the valve authority: the figure 3 model SEEs and the lambda error over
-    a grid of (g, b), the default among them."""
-    lines = [
-        "",
-        "## The valve authority's calibration",
-        "",
-        "The valve authority `psi(d) = d (1 - g + g / sqrt(1 + (d/b)^2))` "
-        "(`ssme_envs.models.engine_valve_flow`) is calibrated, not derived: the default "
-        f"(g = {engine.authority_loss:g}, b = {engine.authority_travel:g}) is a round pair for which every "
-        f"figure 3 model SEE lies in {BAND[0]}-{BAND[1]} and below the paper's at its level and output. "
-        "The grid below shows the neighbourhood (g = 0: the engine without it, as in earlier releases). "
-        "Columns: model SEEs in the band (of 10); model and filter SEEs below Table II's (of 10 each); the "
-        "smallest and the largest model SEE; the largest ratio of a model SEE to the paper's; the largest "
-        "|lambda error| at the PRBS; the chord gain psi(0.01) / 0.01 the PRBS sees.",
-        "",
-        "| g | b | in band | model below paper | filter below paper | smallest | largest | largest / paper "
-        "| lambda error % | chord at 0.01 |",
-        "|---|---|---|---|---|---|---|---|---|---|",
-    ]
-    grid = sorted({*AUTHORITY_GRID, (engine.authority_loss, engine.authority_travel)})
-    for loss, travel in grid:
-        variant = NonlinearEngine(authority_loss=loss, authority_travel=travel)
-        results = run_nonlinear(SEED, POWER_LEVELS, TruthConfig(), engine=variant, test_scale=TEST_SCALE)
-        model_see, ratios, below, lam_err = [], [], {"model": 0, "filter": 0}, []
-        for res in results:
-            lam_err.append(100 * np.max(np.abs(res.identified.model.lam / res.published.lam - 1)))
-            for kind in ("model", "filter"):
-                for i, out in enumerate(OUTPUTS):
-                    ours = res.validation["validation_low_frequency"][kind]["see"][i]
-                    theirs = paper["low_frequency"][kind][out][str(res.power_percent)]
-                    below[kind] += ours < theirs
-                    if kind == "model":
-                        model_see.append(ours)
-                        ratios.append(ours / theirs)
-        chord = valve_authority(np.array(0.01), loss, travel) / 0.01
-        mark = " (default)" if (loss, travel) == (engine.authority_loss, engine.authority_travel) else ""
-        in_band = sum(BAND[0] <= v <= BAND[1] for v in model_see)
-        lines.append(
-            f"| {loss:g}{mark} | {travel:g} | {in_band} | {below['model']} | {below['filter']} | "
-            f"{min(model_see):.4f} | {max(model_see):.4f} | {max(ratios):.2f} | {max(lam_err):.1f} | "
-            f"{float(chord):.3f} |"
-        )
-    return lines
 
 
 def servo_gap(engine: NonlinearEngine, models: dict) -> list[str]:
@@ -359,9 +301,9 @@ def main() -> None:
         "point models at all frequencies, which no truth built to reproduce Table I's Markov "
         "parameters can mimic. On the figure 3 test (valve travel up to 0.02) the identified models "
         "miss the valve authority's fall and the flow curve's growing asymmetry; the authority's two "
-        "constants were calibrated for that test to show the paper's range (next section), so the "
-        "figure 3 SEEs are a calibration, not a prediction.",
-        *authority_section(engine, paper),
+        "constants were calibrated for that test to show the paper's range, so the figure 3 SEEs are "
+        "a calibration, not a prediction: `experiments/results/engine_authority_calibration.md` "
+        "(`python experiments/engine_authority_calibration.py`) shows the neighbourhood of the choice.",
         "",
         "## Model SEE on the figure 3 test against its amplitude",
         "",

@@ -127,8 +127,22 @@ def test_prbs_sees_table_one_lambda_through_the_authority_chord(power):
         ({"authority_travel": 0.0}, "authority_travel"),
         ({"authority_travel": math.inf}, "authority_travel"),
         ({"authority_travel": math.nan}, "authority_travel"),
+        ({"authority_travel": 10**400}, "authority_travel must be a number > 0.*too large"),
+        ({"authority_loss": np.bool_(False)}, "authority_loss"),
+        ({"authority_loss": np.array([0.5])}, "authority_loss"),
+        ({"authority_travel": -np.float32(0.01)}, "authority_travel"),
     ],
 )
 def test_bad_authority_is_refused(kwargs, match):
     with pytest.raises(ValueError, match=match):
         NonlinearEngine(**kwargs)
+
+
+@pytest.mark.parametrize(
+    "loss, travel", [(np.int64(0), np.float32(0.015)), (np.float64(0.7), 1), (-0.0, np.float16(0.02))]
+)
+def test_numpy_numbers_are_accepted_as_floats(loss, travel):
+    engine = NonlinearEngine(authority_loss=loss, authority_travel=travel)
+    assert type(engine.authority_loss) is float and type(engine.authority_travel) is float
+    assert (engine.authority_loss, engine.authority_travel) == (float(loss) + 0.0, float(travel))
+    assert math.copysign(1.0, engine.authority_loss) == 1.0

@@ -61,16 +61,16 @@ class EngineTrackingEnv(TrackingEnv):
     ## Arguments
     power : 65-109 %, default 100. plant : "truth" (default: the linked published model at
     ``power``), "identified" (at 70, 80, 90, 100 %), a model.json path or a model (its dt within
-    0.001-0.5 s, an episode at most 1e6 steps), or
-    "nonlinear": the synthetic nonlinear engine of :mod:`ssme_envs.models.engine_nonlinear`
-    (consistent with Table I's local models, not Rocketdyne's simulation; a ``NonlinearEngine``
-    object also serves, e.g. with a schedule lag), started at its trim at ``power``, its
-    parameters scheduled on the power implied by its own chamber pressure; the valve effects and
-    sensor noise of ``truth`` act as on the linear plant, ``asymmetric_gains=False`` makes its
-    valve flow curve linear (its valve authority, which falls away from the trim, stays), and a
-    controller's ``"truth"`` design model is its linearization at ``power``. truth : TruthConfig
-    or dict (asymmetric_gains, backlash and stiction within 0-0.4 valve travel, sensor_noise
-    within 0-0.05 normalized), the effects added to the plant.
+    0.001-0.5 s, an episode at most 1e6 steps), or "nonlinear": the synthetic nonlinear engine
+    of :mod:`ssme_envs.models.engine_nonlinear` (consistent with Table I's local models, not
+    Rocketdyne's simulation; a ``NonlinearEngine`` object also serves, e.g. with a schedule lag
+    or ``authority_loss=0``), started at its trim at ``power``, its parameters scheduled on the
+    power implied by its own chamber pressure; the valve effects and sensor noise of ``truth``
+    act as on the linear plant, ``asymmetric_gains=False`` makes its valve flow curve linear
+    (its valve authority, which falls away from the trim, stays), and a controller's ``"truth"``
+    design model is its linearization at ``power``. truth : TruthConfig or dict
+    (asymmetric_gains, backlash and stiction within 0-0.4 valve travel, sensor_noise within
+    0-0.05 normalized), the effects added to the plant.
     reference : "random_steps" (default), "step", "ramp", "prbs", "sine_sweep", "attitude",
     "zero", "mixed" (each episode one of random_steps, step, ramp, sine_sweep, attitude);
     reference_amplitude (normalized, default 0.01).

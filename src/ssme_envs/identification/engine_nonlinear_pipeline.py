@@ -90,12 +90,16 @@ def run_nonlinear(
     model at that level and whose ``validation`` holds SEE and fit per record.
     """
     engine = NonlinearEngine() if engine is None else engine
+    truth = (
+        f"nonlinear engine, tau {engine.tau:g} s, valve authority g {engine.authority_loss:g}, "
+        f"b {engine.authority_travel:g}"
+    )
     results = []
     for power in power_levels:
         records = nonlinear_experiment(power, seed, config, engine, test_scale)
         ident = identify_record(records["identification"], **(options or {}))
         model = ident.model
-        model.fit.update(power_percent=power, seed=seed, truth=f"nonlinear engine, tau {engine.tau:g} s")
+        model.fit.update(power_percent=power, seed=seed, truth=truth)
         validation = {
             name: validate(model, rec.u, rec.y) for name, rec in records.items() if name != "identification"
         }

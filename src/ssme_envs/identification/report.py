@@ -309,7 +309,7 @@ def nonlinear_section(
         "backlash, stiction and sensor noise above. It is consistent with the paper's published local "
         "models (its linearization at each Table I level is Table I's model), not Rocketdyne's "
         "simulation; the identified models below see what it adds: the schedule, the authority and the "
-        "flow curve away from a +-0.01 input.",
+        f"flow curve away from a +-0.01 input. Truth: {results[0].identified.model.fit.get('truth', '-')}.",
         "",
         "### Table I: published vs identified on the nonlinear truth",
         "",

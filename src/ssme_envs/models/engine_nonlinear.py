@@ -75,6 +75,7 @@ from ssme_envs.models.engine_valve_flow import (
     AUTHORITY_LOSS,
     AUTHORITY_TRAVEL,
     FLOW_AMPLITUDE,
+    LAMBDA_LIMIT,
     check_authority,
     flow_characteristic,
     valve_effect,
@@ -87,7 +88,6 @@ DEFAULT_SCHEDULE_LAG = 0.0  # s, time constant of the scheduling variable (0: no
 PC_PER_PERCENT = 0.01  # normalized Pc per % of power
 GRID_STEP = 0.25  # %, node spacing of the parameter and trim tables
 _GAUSS = np.polynomial.legendre.leggauss(6)
-_S1 = np.sqrt(2.0) - 1.0  # s(1)
 
 
 @dataclass(frozen=True)
@@ -210,7 +210,7 @@ class NonlinearEngine:
         self.coef = np.ascontiguousarray(spline.c)  # (4, segments, columns)
         self.columns = self._cols  # column slices of the table: K, B, lam, x_eq, v_eq
         fine = self.table(np.linspace(lo, hi, 4 * grid.size))
-        if np.max(np.abs(fine["lam"] - 1.0)) >= _S1:
+        if np.max(np.abs(fine["lam"] - 1.0)) >= LAMBDA_LIMIT:
             raise ValueError(f"|lambda - 1| reaches sqrt(2) - 1 within {SCHEDULE_RANGE} %: phi not monotone")
         radius = np.abs(np.linalg.eigvals(self.shift + fine["K"] @ self.C)).max()
         if radius >= 1.0:
@@ -362,7 +362,12 @@ def simulate_nonlinear(
 
 
 __all__ = [
+    "DEFAULT_SCHEDULE_LAG",
     "FLOW_AMPLITUDE",
+    "GRID_STEP",
+    "OPERATING_RANGE",
+    "PC_PER_PERCENT",
+    "SCHEDULE_RANGE",
     "NonlinearEngine",
     "flow_characteristic",
     "simulate_nonlinear",

@@ -18,8 +18,8 @@ turbopumps and preburners, not the valve, then set the flow). It is odd and mono
 not derived**: no public source gives the SSME's large-signal valve authority. They are the
 round values for which the paper's figure 3 test (valve travel up to 0.02) shows the identified
 point models about as wrong as Table II reports them against Rocketdyne's simulation, while the
-+-0.01 PRBS still shows Table I's lambda (``experiments/results/engine_nonlinear_study.md``
-has the figures for g = 0, the engine of the previous releases, and for these values). The
++-0.01 PRBS still shows Table I's lambda (``experiments/results/engine_authority_calibration.md``
+has the figures for a grid of (g, b) around them and for g = 0, the engine of earlier releases). The
 chord gain at the PRBS's +-0.01 is ``psi(0.01) / 0.01 = 0.88``: a point model identified there
 has about 12 % less gain than the Jacobian.
 
@@ -38,14 +38,16 @@ on a +-0.01 PRBS the curve acts as eq 36's ``u + (lambda - 1)|u|``. Behind ``psi
 lambda at its five levels (``tests/test_engine_valve_flow.py``). Away from the trim the curve
 tends to straight lines of slopes ``1 +- (lambda - 1) / (sqrt 2 - 1)``; it is monotone while
 ``|lambda - 1| < sqrt 2 - 1`` (the engine checks it; at most 0.36 over 62.5-115 %). Larger
-inputs see more asymmetry than eq 36 predicts (at +-0.02 the chord gain is
-``1 + 1.49 (lambda - 1)``), smaller ones less (the curve is smooth where eq 36 has a kink).
+inputs see more asymmetry than eq 36 predicts (at +-0.02 of ``phi``'s own input, 0.035 of valve
+travel behind ``psi``, its chord gain is ``1 + 1.49 (lambda - 1)``), smaller ones less (the curve
+is smooth where eq 36 has a kink).
 Valve travel is not limited.
 """
 
 from __future__ import annotations
 
 import math
+import numbers
 from collections.abc import Callable
 from typing import Any
 
@@ -55,6 +57,7 @@ FLOW_AMPLITUDE = 0.01  # normalized valve travel at which phi's chords are lambd
 AUTHORITY_LOSS = 0.7  # g: fraction of a valve's small-signal gain lost far from the trim
 AUTHORITY_TRAVEL = 0.015  # b: normalized valve travel over which the authority falls
 _S1 = math.sqrt(2.0) - 1.0  # s(1)
+LAMBDA_LIMIT = _S1  # phi is monotone while |lambda - 1| stays below it
 
 
 def valve_effect(
@@ -96,13 +99,26 @@ def _flow(d: Any, lam: Any, sqrt: Callable[[Any], Any], amplitude: float) -> Any
     return amplitude * (z + (lam - 1.0) * (sqrt(1.0 + z * z) - 1.0) / _S1)
 
 
-def check_authority(loss: float, travel: float) -> tuple[float, float]:
+def _real(value: Any, name: str, condition: str, test: Callable[[float], bool]) -> float:
+    """``value`` as a float (any real number type, numpy's too; not a bool), or ValueError."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
+        raise ValueError(f"{name} must be a number {condition}, got {value!r}")
+    try:
+        number = float(value) + 0.0  # -0.0 as 0.0
+    except OverflowError:
+        too_large = "got an integer too large for a float"
+        raise ValueError(f"{name} must be a number {condition}, {too_large}") from None
+    if not (math.isfinite(number) and test(number)):
+        raise ValueError(f"{name} must be a number {condition}, got {value!r}")
+    return number
+
+
+def check_authority(loss: Any, travel: Any) -> tuple[float, float]:
     """``(g, b)`` as floats, or ValueError unless ``0 <= g < 1`` and ``b > 0`` (both finite)."""
-    if isinstance(loss, bool) or not isinstance(loss, (int, float)) or not 0.0 <= loss < 1.0:
-        raise ValueError(f"authority_loss must be a number in [0, 1), got {loss!r}")
-    if isinstance(travel, bool) or not isinstance(travel, (int, float)) or not 0.0 < travel < np.inf:
-        raise ValueError(f"authority_travel must be a finite number > 0 (valve travel), got {travel!r}")
-    return float(loss), float(travel)
+    return (
+        _real(loss, "authority_loss", "in [0, 1)", lambda g: 0.0 <= g < 1.0),
+        _real(travel, "authority_travel", "> 0 (finite, valve travel)", lambda b: b > 0.0),
+    )
 
 
 def valve_authority(
@@ -135,6 +151,7 @@ __all__ = [
     "AUTHORITY_LOSS",
     "AUTHORITY_TRAVEL",
     "FLOW_AMPLITUDE",
+    "LAMBDA_LIMIT",
     "check_authority",
     "flow_characteristic",
     "valve_authority",
