@@ -12,15 +12,14 @@ the PRBS sees. Writes experiments/results/engine_authority_calibration.md.
 
 from __future__ import annotations
 
-import json
 import time
-from importlib import resources
 from pathlib import Path
 
 import numpy as np
 from tqdm import tqdm
 
 from ssme_envs.identification.engine_nonlinear_pipeline import run_nonlinear
+from ssme_envs.identification.report import paper_table2
 from ssme_envs.models import POWER_LEVELS, NonlinearEngine, TruthConfig
 from ssme_envs.models.engine_valve_flow import AUTHORITY_LOSS, AUTHORITY_TRAVEL, valve_authority
 from ssme_envs.outputs import write_text
@@ -31,11 +30,6 @@ OUTPUTS = ("pc", "mr")
 LOSSES = (0.0, 0.5, 0.7, 0.9)  # g
 TRAVELS = (0.01, 0.015, 0.02)  # b, normalized valve travel
 OUT = Path(__file__).resolve().parent / "results" / "engine_authority_calibration.md"
-
-
-def paper_table2() -> dict:
-    data = resources.files("ssme_envs") / "models" / "data" / "engine_table1.json"
-    return json.loads(data.read_text())["table2_see"]["low_frequency"]
 
 
 def row(loss: float, travel: float, paper: dict) -> tuple[str, bool]:
@@ -67,7 +61,7 @@ def row(loss: float, travel: float, paper: dict) -> tuple[str, bool]:
 
 def main() -> None:
     start = time.perf_counter()
-    paper = paper_table2()
+    paper = paper_table2()["low_frequency"]
     grid = [(0.0, TRAVELS[0])] + [(g, b) for g in LOSSES[1:] for b in TRAVELS]
     rows = [row(g, b, paper) for g, b in tqdm(grid, desc="authorities")]
     meeting = [f"(g = {g:g}, b = {b:g})" for (g, b), (_, ok) in zip(grid, rows, strict=True) if ok]

@@ -17,9 +17,7 @@ and the figure engine_nonlinear_servo.png beside it.
 from __future__ import annotations
 
 import dataclasses
-import json
 import time
-from importlib import resources
 from pathlib import Path
 
 import numpy as np
@@ -30,7 +28,7 @@ from agents.lqi import LQIServo, design_servo
 from ssme_envs.evaluation import evaluate, layout_of
 from ssme_envs.identification.engine_nonlinear_pipeline import run_nonlinear
 from ssme_envs.identification.metrics import see, validate
-from ssme_envs.identification.report import agg_pyplot, markov_difference
+from ssme_envs.identification.report import agg_pyplot, markov_difference, paper_table2
 from ssme_envs.models import (
     POWER_LEVELS,
     NonlinearEngine,
@@ -58,11 +56,6 @@ EPISODES, EVAL_SEED = 100, 0
 GAP_SCENARIOS = {TRACKING: (("noise", "nonlinear", 100), ("bucket", "nonlinear_bucket", 67)),
                  THROTTLE: (("mission", "mission_nonlinear", None),)}  # fmt: skip
 SERVO = {TRACKING: "lqi", THROTTLE: "scheduled"}  # the LQ servo of each env (agents.CONTROLLERS)
-
-
-def paper_table2() -> dict:
-    data = resources.files("ssme_envs") / "models" / "data" / "engine_table1.json"
-    return json.loads(data.read_text())["table2_see"]
 
 
 def markov_error(engine: NonlinearEngine, power: int, count: int = 11, h: float = 1e-6) -> float:

@@ -139,7 +139,9 @@ def write_record_report(
     return path
 
 
-def _paper_table2() -> dict:
+def paper_table2() -> dict:
+    """NASA TM-104422's Table II as packaged: SEE by record ("prbs", "low_frequency"), kind
+    ("model", "filter"), output ("pc", "mr") and power level (a string, %)."""
     doc = json.loads((resources.files("ssme_envs") / "models" / "data" / "engine_table1.json").read_text())
     return doc["table2_see"]
 
@@ -207,7 +209,7 @@ TABLE2_RECORDS = (
 
 def write_default_report(out_dir: Path, results: list[LevelResult], seed: int, truth_note: str) -> Path:
     """report.md of the embedded experiment: Table I and Table II comparisons and figures 4-8."""
-    paper = _paper_table2()
+    paper = paper_table2()
     powers = [r.power_percent for r in results]
     lines = [
         "# SSME identification on the embedded experiment",
@@ -295,7 +297,7 @@ def nonlinear_section(
     ``results`` from :func:`~ssme_envs.identification.engine_nonlinear_pipeline.run_nonlinear`;
     ``amplitude``: the largest |command| of each valve in the figure 3 test, normalized travel.
     """
-    paper = _paper_table2()
+    paper = paper_table2()
     lines = [
         "## The nonlinear engine truth",
         "",
