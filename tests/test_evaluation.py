@@ -176,3 +176,11 @@ def test_report_command_writes_one_report(tmp_path, capsys):
     # every figure the report shows exists
     for figure in __import__("re").findall(r"!\[[^\]]*\]\(([^)]+)\)", text):
         assert (out / figure).exists(), figure
+
+
+@pytest.mark.parametrize("episodes", [np.int64(2), np.int32(2)])
+def test_numpy_integer_episode_counts_are_accepted(episodes):
+    from agents import parse_controller
+
+    result = evaluate(TRACKING, {"zero": parse_controller("zero", TRACKING)}, ["nominal"], episodes=episodes)
+    assert result["nominal"]["zero"].episodes == 2

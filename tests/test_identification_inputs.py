@@ -102,3 +102,18 @@ def test_a_model_file_with_a_non_finite_figure_names_where_it_is():
         "A": [[1.0, 2.5]],
         "fit": {"n": [1, {"k": 2}]},
     }
+
+
+@pytest.mark.parametrize("scale", [1e154, 1e200, 1e300])
+@pytest.mark.parametrize("method", ["identify", "dsr_e"])
+def test_values_whose_squares_overflow_are_refused_by_name(scale, method):
+    """A library call (not only a record file) with an output whose squares overflow float64 is
+    refused naming the channel, instead of turning into inf or NaN inside the regression."""
+    from ssme_envs.identification.subspace import dsr_e
+
+    u = prbs(300, 0.01)
+    y = np.cumsum(u, axis=0)
+    y[7, 1] = scale
+    call = (lambda: identify(u, y, 0.04)) if method == "identify" else (lambda: dsr_e(u, y, 0.04))
+    with pytest.raises(ValueError, match=r"output '[^']+' reaches .*: its squares overflow float64"):
+        call()

@@ -16,6 +16,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from ssme_envs.envs.inputs import positive_int
 from ssme_envs.evaluation_result import ActuatorMetrics, ControllerMetrics, EvaluationResult, OutputMetrics
 from ssme_envs.metrics import limit_cycle, saturation_fraction, step_metrics, step_response
 from ssme_envs.models.linear import describe
@@ -333,8 +334,7 @@ def evaluate(
         holds the rollouts.
     """
     check_env_id(env_id)
-    if not isinstance(episodes, int) or isinstance(episodes, bool) or episodes < 1:
-        raise ValueError(f"episodes must be a positive integer, got {describe(episodes)}")
+    episodes = positive_int("episodes", episodes)
     check_factories(controllers)
     names = scenario_names(env_id) if scenarios is None else check_scenarios(env_id, scenarios)
     for scenario in names:  # every scenario takes the options, before any work (a few ms each)

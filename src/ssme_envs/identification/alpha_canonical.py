@@ -43,6 +43,7 @@ import numpy as np
 from ssme_envs.identification.alpha_fit import _binary_amplitudes, _Fit, _fit, _input_features
 from ssme_envs.identification.covariance import parameter_uncertainty
 from ssme_envs.identification.output_error import held_out_criterion, refine_contenders
+from ssme_envs.identification.records import check_magnitudes
 from ssme_envs.identification.structure import (
     DEFAULT_MAX_INDEX,
     DEFAULT_RANK_TOL,
@@ -95,7 +96,9 @@ def check_record(
     Raises
     ------
     ValueError
-        Naming the problem: shapes, NaN/inf, constant or linearly dependent signals.
+        Naming the problem: shapes, NaN/inf or values whose squares overflow
+        (:func:`~ssme_envs.identification.records.check_magnitudes`), constant or linearly
+        dependent signals.
     """
     u = np.asarray(u, dtype=float)
     y = np.asarray(y, dtype=float)
@@ -107,11 +110,8 @@ def check_record(
         raise ValueError(f"inputs have {u.shape[0]} samples but outputs have {y.shape[0]}")
     in_names = _names(input_names, u.shape[1], "u")
     out_names = _names(output_names, y.shape[1], "y")
-    for arr, names, kind in ((u, in_names, "input"), (y, out_names, "output")):
-        bad = ~np.isfinite(arr)
-        if bad.any():
-            row, col = np.argwhere(bad)[0]
-            raise ValueError(f"{kind} '{names[col]}' has NaN or inf at sample {row} ({bad.sum()} bad values)")
+    check_magnitudes(u, in_names, "input")
+    check_magnitudes(y, out_names, "output")
     for arr, names, kind, what in (
         (u, in_names, "input", "does not excite the system"),
         (y, out_names, "output", "does not respond"),
