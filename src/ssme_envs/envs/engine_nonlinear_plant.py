@@ -1,12 +1,13 @@
 """The nonlinear engine truth as the plant of the engine environments (``plant="nonlinear"``).
 
 :class:`NonlinearPlantCore` steps :class:`~ssme_envs.models.engine_nonlinear.NonlinearEngine`
-(its valve authority and flow curve, and its Table I parameters and trim scheduled on the power implied by its
-own chamber pressure) behind the valve backlash and stiction of the truth, on both carriers of
-:mod:`ssme_envs.envs.task`: Python floats for one env and (N,) rows for a batch, the same IEEE
-operations in the same order, so that an env gives the same bits alone and in a batch. The
-schedule table is the engine's own piecewise cubic (``NonlinearEngine.coef``): the env evaluates
-it at the engine's scheduling variable each step, in the order of ``NonlinearEngine.table``.
+(its valve authority and flow curve, and its Table I parameters and trim scheduled on the power
+implied by its own chamber pressure) behind the valve backlash and stiction of the truth, on
+both carriers of :mod:`ssme_envs.envs.task`: Python floats for one env and (N,) rows for a
+batch, the same IEEE operations in the same order, so that an env gives the same bits alone and
+in a batch. The schedule table is the engine's own piecewise cubic (``NonlinearEngine.coef``):
+the env evaluates it at the engine's scheduling variable each step, in the order of
+``NonlinearEngine.table``.
 
 ``EngineTracking-v0`` at power P starts at the engine's trim at P; its valve commands are
 deviations from the trim valve positions ``v_eq(P)`` and its outputs deviations from the trim
