@@ -18,10 +18,11 @@ turbopumps and preburners, not the valve, then set the flow). It is odd and mono
 not derived**: no public source gives the SSME's large-signal valve authority. They are the
 round values for which the paper's figure 3 test (valve travel up to 0.02) shows the identified
 point models about as wrong as Table II reports them against Rocketdyne's simulation, while the
-+-0.01 PRBS still shows Table I's lambda (``experiments/results/engine_authority_calibration.md``
-has the figures for a grid of (g, b) around them and for g = 0, the engine of earlier releases). The
-chord gain at the PRBS's +-0.01 is ``psi(0.01) / 0.01 = 0.88``: a point model identified there
-has about 12 % less gain than the Jacobian.
++-0.01 PRBS still shows Table I's lambda
+(``experiments/results/engine_authority_calibration.md`` has the figures for a grid of (g, b)
+around them and for g = 0, the engine of earlier releases). The chord gain at the PRBS's +-0.01
+is ``psi(0.01) / 0.01 = 0.88``: a point model identified there has about 12 % less gain than the
+Jacobian.
 
 **Flow characteristic.** ::
 
@@ -30,18 +31,17 @@ has about 12 % less gain than the Jacobian.
 Eq 36 gives the response to a +-a binary input the up and down gains ``lambda B`` and
 ``(2 - lambda) B``; their mean ``B`` is the gain of the symmetric part, and ``C A^k B`` are
 Table I's Markov parameters. ``phi`` has slope 1 at ``d = 0``, so the Jacobian's B (a symmetric
-derivative) is Table I's B, and curvature ``phi''(0) = (lambda - 1) / (a (sqrt 2 - 1))``,
-chosen so that the chords to ``d = +-a`` have exactly the gains ``lambda`` and ``2 - lambda``:
-on a +-0.01 PRBS the curve acts as eq 36's ``u + (lambda - 1)|u|``. Behind ``psi`` the PRBS sees
+derivative) is Table I's B, and curvature ``phi''(0) = (lambda - 1) / (a (sqrt 2 - 1))``, chosen
+so that the chords to ``d = +-a`` have exactly the gains ``lambda`` and ``2 - lambda``: on a
++-0.01 PRBS the curve acts as eq 36's ``u + (lambda - 1)|u|``. Behind ``psi`` the PRBS sees
 ``phi``'s chords at ``+-c a``, ``c = psi(a) / a = 0.88``: eq 36's lambda from them is
-``1 + (lambda - 1) s(c) / (c s(1))``, 0.91 (lambda - 1) from 1, within 2.7 % of Table I's
-lambda at its five levels (``tests/test_engine_valve_flow.py``). Away from the trim the curve
-tends to straight lines of slopes ``1 +- (lambda - 1) / (sqrt 2 - 1)``; it is monotone while
+``1 + (lambda - 1) s(c) / (c s(1))``, 0.91 (lambda - 1) from 1, within 2.7 % of Table I's lambda
+at its five levels (``tests/test_engine_valve_flow.py``). Away from the trim the curve tends to
+straight lines of slopes ``1 +- (lambda - 1) / (sqrt 2 - 1)``; it is monotone while
 ``|lambda - 1| < sqrt 2 - 1`` (the engine checks it; at most 0.36 over 62.5-115 %). Larger
 inputs see more asymmetry than eq 36 predicts (at +-0.02 of ``phi``'s own input, 0.035 of valve
-travel behind ``psi``, its chord gain is ``1 + 1.49 (lambda - 1)``), smaller ones less (the curve
-is smooth where eq 36 has a kink).
-Valve travel is not limited.
+travel behind ``psi``, its chord gain is ``1 + 1.49 (lambda - 1)``), smaller ones less (the
+curve is smooth where eq 36 has a kink). Valve travel is not limited.
 """
 
 from __future__ import annotations
