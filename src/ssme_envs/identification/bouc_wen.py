@@ -30,8 +30,10 @@ The record must start at rest at the zero of the angle (deviations from the rest
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -341,6 +343,24 @@ def _assess(
             "filter_rad_s": wf,
             "substeps": substeps,  # of the final refinement
         },
+    )
+
+
+def remove_bias(fit: BoucWenFit, bias: Mapping[str, float]) -> BoucWenFit:
+    """``fit`` with ``bias`` subtracted from its normalized parameters (a determined fit): the
+    Table 1 form rebuilt from them and the relative standard errors recomputed; the standard
+    errors and covariance, the noise's, are kept."""
+    if not fit.determined:
+        raise ValueError("only a determined fit has parameters to correct")
+    normalized = {name: value - float(bias[name]) for name, value in fit.normalized.items()}
+    relative = {
+        name: fit.standard_errors[name] / abs(v) if v != 0 else float("inf") for name, v in normalized.items()
+    }
+    return dataclasses.replace(
+        fit,
+        params=_table1_form(normalized, fit.normalization_A),
+        normalized=normalized,
+        relative_std=relative,
     )
 
 

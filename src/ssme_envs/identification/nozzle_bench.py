@@ -1,7 +1,7 @@
 """The nozzle's torque -> angle record: simulated on the embedded bench (PRBS torque, sensor noise,
-anti-alias filter and decimation, and the bias that chain puts on DSR_e's J, b, k) or read from
-and written to CSV. Apart from :mod:`.nozzle_pipeline`, which identifies and validates from any
-such record, the bench's or a user's."""
+anti-alias filter and decimation, and the bias that chain puts on DSR_e's J, b, k and on the
+Bouc-Wen fit's parameters) or read from and written to CSV. Apart from :mod:`.nozzle_pipeline`,
+which identifies and validates from any such record, the bench's or a user's."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import scipy.signal
 
-from ssme_envs.identification.bouc_wen import check_torque_record
+from ssme_envs.identification.bouc_wen import BoucWenFit, check_torque_record, fit_bouc_wen
 from ssme_envs.identification.records import check_magnitudes, read_columns, write_columns
 from ssme_envs.identification.subspace import dsr_e, second_order_parameters
 from ssme_envs.models.nozzle import (
@@ -176,6 +176,34 @@ def acquisition_bias(
         found.append([tf["J"], tf["b"], tf["k"]])
     mean = np.mean(found, axis=0)
     return {key: float(m - value) for key, m, value in zip(("J", "b", "k"), mean, jbk, strict=True)}
+
+
+def bouc_wen_acquisition_bias(tau: np.ndarray, fit: BoucWenFit, seed: int, workers: int) -> dict[str, float]:
+    """The bias of the Bouc-Wen fit's normalized parameters that the bench's acquisition chain
+    causes, by simulation: the fitted joint driven by the record's torque at the bench rate,
+    acquired without noise (:func:`acquire`) and fitted again as the record was; the change is
+    the bias at the estimate. The fit is output error, so the noise adds no bias of its own to
+    first order (one noise-free acquisition, unlike :func:`acquisition_bias`). Corrected
+    estimate: the estimate minus it (:func:`~ssme_envs.identification.bouc_wen.remove_bias`);
+    what remains is second order in the estimate's error.
+
+    Parameters
+    ----------
+    tau : array, shape (T,)
+        The record's torque at Ts = 0.008 s, N m.
+    fit : BoucWenFit
+        A determined fit of the record.
+    seed, workers : int
+        As the record's fit used them.
+    """
+    if not fit.determined:
+        raise ValueError("only a determined fit has a joint to simulate")
+    fast = _bench_rate_angle(fit.params, tau, np.inf)
+    measured = acquire(fast, seed, 0.0)
+    again = fit_bouc_wen(
+        tau, measured, NOZZLE_DT, seed=seed, workers=workers, normalization_A=fit.normalization_A
+    )
+    return {name: again.normalized[name] - value for name, value in fit.normalized.items()}
 
 
 def validation_experiment(params: NozzleParameters, seed: int = DEFAULT_SEED + 1) -> NozzleRecord:

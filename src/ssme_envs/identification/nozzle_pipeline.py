@@ -22,6 +22,7 @@ from ssme_envs.identification.bouc_wen import (
     BoucWenFit,
     check_torque_record,
     fit_bouc_wen,
+    remove_bias,
 )
 from ssme_envs.identification.metrics import fit_percent
 from ssme_envs.identification.nozzle_bench import (
@@ -35,6 +36,7 @@ from ssme_envs.identification.nozzle_bench import (
     acquisition_bias,
     bench_experiment,
     bench_motion,
+    bouc_wen_acquisition_bias,
     read_nozzle_record,
     strong_hysteresis_nozzle,
     validation_experiment,
@@ -94,7 +96,9 @@ def identify_nozzle(
     ``uncertainty`` blocks. ``bench_noise`` (rad at the bench rate): the record comes through the
     embedded bench's acquisition chain (:func:`acquire`) with this sensor noise; the chain's bias
     on J, b, k is then removed (:func:`acquisition_bias`, ``BIAS_DRAWS`` simulated acquisitions,
-    their scatter added to the covariance); the discrete model stays what the data give.
+    their scatter added to the covariance), and its bias on a determined Bouc-Wen fit's
+    parameters (:func:`bouc_wen_acquisition_bias`, one noise-free acquisition and refit; the
+    covariance kept); the discrete model stays what the data give.
     """
     check_torque_record(record.tau, record.beta, names=(record.input_name, record.output_name))
     subspace = dsr_e(record.tau, record.beta, record.dt, order=2)
@@ -121,6 +125,10 @@ def identify_nozzle(
     bw = fit_bouc_wen(
         record.tau, record.beta, record.dt, seed=seed, workers=workers, normalization_A=normalization_A
     )
+    bw_bias = None
+    if bench_noise is not None and bw.determined:
+        bw_bias = bouc_wen_acquisition_bias(record.tau, bw, seed, workers)
+        bw = remove_bias(bw, bw_bias)
     sim_linear = linear.simulate(record.tau[:, None])[:, 0]
     fit = {
         "samples": int(record.tau.size),
@@ -152,6 +160,7 @@ def identify_nozzle(
             "determined": bw.determined,
             "reason": bw.reason,
             "normalized": bw.normalized,
+            **({} if bw_bias is None else {"acquisition_bias": bw_bias}),
             "standard_errors": _finite_or_none(bw.standard_errors),
             "relative_std": _finite_or_none(bw.relative_std),
             "p_value": bw.p_value,

@@ -170,8 +170,10 @@ def _uncertainty_note(ident: NozzleIdentification) -> list[str]:
     ]
 
 
-def _bouc_wen_section(bw: BoucWenFit) -> list[str]:
-    """Verdict, and the normalized parameters with their standard errors only when determined."""
+def _bouc_wen_section(bw: BoucWenFit, bias: dict[str, float] | None = None) -> list[str]:
+    """Verdict, and the normalized parameters with their standard errors only when determined;
+    ``bias``: the acquisition chain's, removed from them (the model's ``fit``), when the record
+    came from the embedded bench."""
     fits = (
         f"Simulation fit {bw.fit_percent:.2f} % (a linear joint fitted the same way: "
         f"{bw.linear_fit_percent:.2f} %)."
@@ -196,6 +198,18 @@ def _bouc_wen_section(bw: BoucWenFit) -> list[str]:
         "|---|---|---|---|",
         *rows,
         "",
+        *(
+            []
+            if bias is None
+            else [
+                "The values are corrected for the bench's acquisition chain, whose bias at the estimate "
+                "was simulated (the fitted joint at the bench rate, acquired without noise and fitted "
+                "again): "
+                + ", ".join(f"{key} {-value:+.4g}" for key, value in bias.items())
+                + " (`bouc_wen_acquisition_bias`); the standard errors are the noise's.",
+                "",
+            ]
+        ),
     ]
 
 
@@ -243,7 +257,7 @@ def write_nozzle_report(
         parameter_row(f"identified Bouc-Wen (normalization A = {bw.normalization_A:g})", bw.params),
         "",
         *_uncertainty_note(ident),
-        *_bouc_wen_section(bw),
+        *_bouc_wen_section(bw, model.fit["bouc_wen"].get("acquisition_bias")),
         "## Figures",
         "",
     ]
