@@ -308,3 +308,28 @@ def test_packaged_bouc_wen_joints_lie_within_their_stated_uncertainty_of_the_tru
     bias = model.fit["bouc_wen"]["acquisition_bias"]
     raw = d + np.array([bias[p] for p in NORMALIZED_NAMES])
     assert float(raw @ np.linalg.solve(block.covariance, raw)) > 10 * bound
+
+
+def test_remove_bias_shifts_the_estimate_and_keeps_the_noise_uncertainty():
+    """The corrected fit: normalized parameters minus the bias, the Table 1 form rebuilt from
+    them (its normalized form equals them), standard errors and covariance as they were; an
+    undetermined fit is refused."""
+    import dataclasses
+
+    from ssme_envs.identification.bouc_wen import BoucWenFit, remove_bias
+
+    joint = published_nozzle("bouc_wen")
+    normalized = joint.normalized()
+    se = {p: 0.01 * abs(v) for p, v in normalized.items()}
+    cov = np.diag([se[p] ** 2 for p in NORMALIZED_NAMES])
+    fit = BoucWenFit(True, joint, joint, normalized, {p: 0.01 for p in normalized}, se, cov, 0.0, 99.0, 90.0,
+                     "determined", 0.35)  # fmt: skip
+    bias = {p: 0.003 * v for p, v in normalized.items()}
+    fixed = remove_bias(fit, bias)
+    for p in NORMALIZED_NAMES:
+        assert fixed.normalized[p] == pytest.approx(normalized[p] * 0.997, rel=1e-12)
+        assert fixed.params.normalized()[p] == pytest.approx(fixed.normalized[p], rel=1e-9)
+        assert fixed.relative_std[p] == pytest.approx(0.01 / 0.997, rel=1e-9)
+    assert fixed.standard_errors == se and fixed.covariance is cov
+    with pytest.raises(ValueError, match="determined"):
+        remove_bias(dataclasses.replace(fit, determined=False, params=None), bias)
