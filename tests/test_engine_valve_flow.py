@@ -1,6 +1,6 @@
 """The nonlinear engine's valve effect (``ssme_envs.models.engine_valve_flow``): the valve authority
-against its documented slope (integrated by scipy), one arithmetic on floats and arrays, and the
-engine without it equal to the engine of earlier releases."""
+against its documented slope (integrated by scipy), one arithmetic on floats and arrays, the PRBS's
+gains through it, and an engine without it stepping as the flow curve alone."""
 
 from __future__ import annotations
 
