@@ -12,6 +12,7 @@ from agents.lqi import schedule_levels, scheduled_tables
 from agents.plants import linear_design, second_order
 from ssme_envs.envs.launcher_pitch import LauncherTask
 from ssme_envs.envs.nozzle_tvc import NozzleTask
+from ssme_envs.models.linear import spectral_radius
 
 
 def simc_pi(step: np.ndarray, dt: float) -> tuple[float, float]:
@@ -77,7 +78,7 @@ def coupled_radius(design: Any, kc: np.ndarray, ki: np.ndarray) -> float:
         [-kp @ C, np.eye(m), -kd],
         [-C, np.zeros((m, m)), np.zeros((m, m))],
     ])  # fmt: skip
-    return float(np.abs(np.linalg.eigvals(loop)).max())
+    return spectral_radius(loop)
 
 
 class ScheduledPI(DecoupledPI):

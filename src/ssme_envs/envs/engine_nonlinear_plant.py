@@ -106,6 +106,7 @@ class NonlinearPlantCore:
     array_table: np.ndarray = field(init=False, repr=False)  # (4, columns, segments)
     input_column: np.ndarray = field(init=False, repr=False)  # input_offset as (2, 1)
     shift_source: tuple = field(init=False, repr=False)  # per state, its source in A_o (-1: none)
+    authority: tuple[float, float] = field(init=False, repr=False)  # the engine's (g, b), read per step
 
     def __post_init__(self) -> None:
         layout = self.engine.layout
@@ -115,6 +116,7 @@ class NonlinearPlantCore:
                                _tables(self.engine), strict=True):  # fmt: skip
             object.__setattr__(self, name, value)
         object.__setattr__(self, "input_column", np.array(self.input_offset)[:, None])
+        object.__setattr__(self, "authority", (self.engine.authority_loss, self.engine.authority_travel))
 
     @classmethod
     def at_trim(cls, engine: NonlinearEngine, power: float, asymmetric: bool, half_backlash: float,
@@ -176,8 +178,7 @@ class NonlinearPlantCore:
         e = [xi - qi for xi, qi in zip(x, x_eq, strict=True)]
         o0, o1 = self.input_offset
         d0, d1 = (v0 + o0) - q0, (v1 + o1) - q1
-        engine, asymmetric = self.engine, self.asymmetric
-        loss, travel = engine.authority_loss, engine.authority_travel
+        asymmetric, (loss, travel) = self.asymmetric, self.authority
         d0 = valve_effect(d0, g0, math.sqrt, asymmetric, loss, travel)
         d1 = valve_effect(d1, g1, math.sqrt, asymmetric, loss, travel)
         y0, y1 = e[n - 2], e[n - 1]
@@ -210,9 +211,7 @@ class NonlinearPlantCore:
         x_eq = vals[cols["x_eq"]]
         e = x - x_eq
         d = (valve + self.input_column) - vals[cols["v_eq"]]
-        engine = self.engine
-        d = valve_effect(d, vals[cols["lam"]], np.sqrt, self.asymmetric, engine.authority_loss,
-                         engine.authority_travel)  # fmt: skip
+        d = valve_effect(d, vals[cols["lam"]], np.sqrt, self.asymmetric, *self.authority)
         k_gain = vals[cols["K"]].reshape(n, 2, count)
         b_gain = vals[cols["B"]].reshape(n, 2, count)
         x = dynamics_arrays(e, d, self.shift_source, k_gain, b_gain)

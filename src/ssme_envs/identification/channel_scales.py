@@ -53,6 +53,17 @@ def equilibration(u: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     return exponents[: u.shape[1]], exponents[u.shape[1] :]
 
 
+def equilibrated(
+    u: np.ndarray, y: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray] | None]:
+    """The record divided by the powers of two of :func:`equilibration` (exactly), and those
+    exponents; the record itself and None when it is balanced."""
+    scales = equilibration(u, y)
+    if scales is None:
+        return u, y, None
+    return np.ldexp(u, -scales[0]), np.ldexp(y, -scales[1]), scales
+
+
 def restore_units(
     model: InnovationsModel, singular_values: np.ndarray, u_exp: np.ndarray, y_exp: np.ndarray
 ) -> tuple[InnovationsModel, np.ndarray]:
@@ -83,4 +94,4 @@ def restore_units(
     return restored, singular_values * g
 
 
-__all__ = ["CHANNEL_SPREAD", "OUTPUT_SPREAD", "equilibration", "restore_units"]
+__all__ = ["CHANNEL_SPREAD", "OUTPUT_SPREAD", "equilibrated", "equilibration", "restore_units"]

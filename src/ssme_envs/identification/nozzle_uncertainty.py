@@ -53,7 +53,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.signal
 
-from ssme_envs.identification.channel_scales import equilibration
+from ssme_envs.identification.channel_scales import equilibrated
 from ssme_envs.identification.subspace import SubspaceResult, _innovations, dsr_e, second_order_parameters
 from ssme_envs.models.statespace import check_dt
 from ssme_envs.models.uncertainty import ParameterUncertainty
@@ -187,12 +187,9 @@ def _record_innovations(u: np.ndarray, y: np.ndarray, past: int) -> np.ndarray:
     and the standard errors with it. The powers of two and their undoing are exact, and a
     balanced record is used as it is (its residuals bit for bit).
     """
-    u, y = u[:, None], y[:, None]
-    scales = equilibration(u, y)
-    if scales is None:
-        return _innovations(u, y, past)[:, 0]
-    u_exp, y_exp = scales
-    return np.ldexp(_innovations(np.ldexp(u, -u_exp), np.ldexp(y, -y_exp), past)[:, 0], y_exp[0])
+    u_scaled, y_scaled, scales = equilibrated(u[:, None], y[:, None])
+    residual = _innovations(u_scaled, y_scaled, past)[:, 0]
+    return residual if scales is None else np.ldexp(residual, scales[1][0])
 
 
 def dsr_e_uncertainty(

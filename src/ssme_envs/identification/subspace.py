@@ -45,7 +45,7 @@ import numpy as np
 import scipy.linalg
 
 from ssme_envs.identification.alpha_canonical import check_record
-from ssme_envs.identification.channel_scales import equilibration, restore_units
+from ssme_envs.identification.channel_scales import equilibrated, restore_units
 from ssme_envs.identification.innovations_model import (
     InnovationsModel,
     SubspaceResult,
@@ -53,8 +53,8 @@ from ssme_envs.identification.innovations_model import (
     second_order_parameters,
     to_continuous,
 )
-from ssme_envs.identification.subspace_regression import input_matrices, spectral_radius
-from ssme_envs.models.linear import check_dt
+from ssme_envs.identification.subspace_regression import input_matrices
+from ssme_envs.models.linear import check_dt, spectral_radius
 
 DEFAULT_MAX_ORDER = 10
 # Target for the neglected term of the innovations estimate: rho(A - K C)^J below this.
@@ -303,9 +303,7 @@ def dsr_e(
             f"need at least {needed} (use a longer record or smaller horizons)"
         )
 
-    scales = equilibration(u, y)
-    if scales is not None:
-        u, y = np.ldexp(u, -scales[0]), np.ldexp(y, -scales[1])
+    u, y, scales = equilibrated(u, y)
     model, singular_values, found, noise_free = _identify_once(u, y, dt, past, future, order, max_order)
     if past_horizon is None and not noise_free:
         cap = _past_horizon_cap(n_samples, m, p, future)

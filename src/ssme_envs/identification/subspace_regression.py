@@ -6,6 +6,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.signal
 
+from ssme_envs.models.linear import spectral_radius
+
 
 def _output_powers(a: np.ndarray, c: np.ndarray, count: int) -> np.ndarray:
     """``C A^k`` for k = 0..count-1, shape (count, p, n), by doubling."""
@@ -74,9 +76,4 @@ def input_matrices(
     return gains[:, :m], d, k
 
 
-def spectral_radius(a: np.ndarray) -> float:
-    """Spectral radius of ``a``."""
-    return float(np.max(np.abs(np.linalg.eigvals(a))))
-
-
-__all__ = ["input_matrices", "spectral_radius"]
+__all__ = ["input_matrices"]

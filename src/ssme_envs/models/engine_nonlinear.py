@@ -80,6 +80,7 @@ from ssme_envs.models.engine_valve_flow import (
     flow_characteristic,
     valve_effect,
 )
+from ssme_envs.models.linear import spectral_radius
 from ssme_envs.models.statespace import AlphaCanonicalModel
 
 SCHEDULE_RANGE = (62.5, 115.0)  # %, saturation of the scheduling variable
@@ -212,7 +213,7 @@ class NonlinearEngine:
         fine = self.table(np.linspace(lo, hi, 4 * grid.size))
         if np.max(np.abs(fine["lam"] - 1.0)) >= LAMBDA_LIMIT:
             raise ValueError(f"|lambda - 1| reaches sqrt(2) - 1 within {SCHEDULE_RANGE} %: phi not monotone")
-        radius = np.abs(np.linalg.eigvals(self.shift + fine["K"] @ self.C)).max()
+        radius = spectral_radius(self.shift + fine["K"] @ self.C)
         if radius >= 1.0:
             raise ValueError(f"the scheduled A is unstable within {SCHEDULE_RANGE} % (radius {radius:.3f})")
 

@@ -47,11 +47,13 @@ curve is smooth where eq 36 has a kink). Valve travel is not limited.
 from __future__ import annotations
 
 import math
-import numbers
+import sys
 from collections.abc import Callable
 from typing import Any
 
 import numpy as np
+
+from ssme_envs.models.linear import finite_float
 
 FLOW_AMPLITUDE = 0.01  # normalized valve travel at which phi's chords are lambda and 2 - lambda
 AUTHORITY_LOSS = 0.7  # g: fraction of a valve's small-signal gain lost far from the trim
@@ -100,16 +102,16 @@ def _flow(d: Any, lam: Any, sqrt: Callable[[Any], Any], amplitude: float) -> Any
 
 
 def _real(value: Any, name: str, condition: str, test: Callable[[float], bool]) -> float:
-    """``value`` as a float (any real number type, numpy's too; not a bool), or ValueError."""
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
-        raise ValueError(f"{name} must be a number {condition}, got {value!r}")
+    """``value`` as a float (a real number, numpy's too, not a bool; -0.0 as 0.0) that passes
+    ``test``, or ValueError naming ``name`` and the ``condition``."""
     try:
-        number = float(value) + 0.0  # -0.0 as 0.0
-    except OverflowError:
-        too_large = "got an integer too large for a float"
-        raise ValueError(f"{name} must be a number {condition}, {too_large}") from None
-    if not (math.isfinite(number) and test(number)):
-        raise ValueError(f"{name} must be a number {condition}, got {value!r}")
+        number = finite_float(value, name) + 0.0
+    except ValueError:
+        number = math.nan  # fails every test
+    if not test(number):
+        huge = isinstance(value, int) and not isinstance(value, bool) and abs(value) > sys.float_info.max
+        got = "an integer too large for a float" if huge else repr(value)
+        raise ValueError(f"{name} must be a number {condition}, got {got}")
     return number
 
 

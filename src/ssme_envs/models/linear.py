@@ -99,22 +99,27 @@ def refuse_unknown_keys(block: Any, known: Any, where: str, hint: str = "") -> N
         raise ValueError(f"{where}unknown key(s) {', '.join(map(describe, unknown))}{hint}")
 
 
+def _file_value(value: Any) -> str:
+    """A refused value for a message, as a file spells it: a boolean, null, else cut short."""
+    if isinstance(value, bool | np.bool_):
+        return boolean_text(value)
+    return "null" if value is None else describe(value)
+
+
 def finite_float(value: Any, name: str) -> float:
     """``value`` as a float, or ValueError naming ``name`` unless it is a finite real number.
 
     Booleans are refused (JSON's ``true`` is no number), and so are integers beyond a float's
     range, which JSON files can hold (``1e400`` reads as inf, ``1`` and 400 zeros as an int).
     """
-    if isinstance(value, bool | np.bool_):
-        raise ValueError(f"{name} must be a finite number, got {boolean_text(value)}")
-    if isinstance(value, numbers.Real):
+    if isinstance(value, numbers.Real) and not isinstance(value, bool | np.bool_):
         try:
             result = float(value)
         except OverflowError:
             result = math.inf
         if math.isfinite(result):
             return result
-    raise ValueError(f"{name} must be a finite number, got {'null' if value is None else describe(value)}")
+    raise ValueError(f"{name} must be a finite number, got {_file_value(value)}")
 
 
 def check_dt(dt: Any) -> float:
@@ -124,8 +129,7 @@ def check_dt(dt: Any) -> float:
     except ValueError:
         value = math.nan
     if not value > 0:
-        got = boolean_text(dt) if isinstance(dt, bool | np.bool_) else "null" if dt is None else describe(dt)
-        raise ValueError(f"dt must be a positive number of seconds, got {got}")
+        raise ValueError(f"dt must be a positive number of seconds, got {_file_value(dt)}")
     return value
 
 
@@ -203,6 +207,12 @@ class PlantMatrices:
         return self.plant.dt
 
 
+def spectral_radius(a: np.ndarray) -> float:
+    """Largest eigenvalue modulus of the square matrix ``a`` (or of a stack of them: the largest
+    over the stack)."""
+    return float(np.max(np.abs(np.linalg.eigvals(a))))
+
+
 @dataclass(frozen=True)
 class StateSpace(Dimensions):
     """A discrete linear model ``x(k+1) = A x + B u``, ``y = C x + D u``.
@@ -250,4 +260,5 @@ __all__ = [
     "non_number_at",
     "refuse_non_numbers",
     "refuse_unknown_keys",
+    "spectral_radius",
 ]

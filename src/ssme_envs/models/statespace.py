@@ -41,7 +41,15 @@ from typing import Any
 
 import numpy as np
 
-from ssme_envs.models.linear import Dimensions, StateSpace, as_floats, as_matrix, check_dt, describe
+from ssme_envs.models.linear import (
+    Dimensions,
+    StateSpace,
+    as_floats,
+    as_matrix,
+    check_dt,
+    describe,
+    spectral_radius,
+)
 from ssme_envs.models.statespace_json import dumps_compact, read_json
 from ssme_envs.models.uncertainty import ParameterUncertainty
 
@@ -283,7 +291,7 @@ class AlphaCanonicalModel(Dimensions):
         return out
 
     def spectral_radius(self) -> float:
-        return float(np.max(np.abs(np.linalg.eigvals(self.A))))
+        return spectral_radius(self.A)
 
     def dc_gain(self) -> np.ndarray:
         """Steady-state gain from u* to y, shape (p, m)."""
