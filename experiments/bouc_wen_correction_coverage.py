@@ -84,5 +84,8 @@ def main(seeds: int) -> None:
 
 if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seeds", type=int, default=12)
-    main(parser.parse_args().seeds)
+    parser.add_argument("--seeds", type=int, default=12, help="noise seeds, from 1000 (default: 12)")
+    args = parser.parse_args()
+    if args.seeds < 1:
+        parser.error(f"--seeds must be at least 1, got {args.seeds}")
+    main(args.seeds)
