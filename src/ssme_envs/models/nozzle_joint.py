@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import json
 import math
+import warnings
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, fields
 from functools import cache
 from importlib import resources
@@ -12,6 +14,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from ssme_envs.models.joint_power import power_array, power_float, tables
 from ssme_envs.models.linear import finite_float
 
 NOZZLE_DT = 0.008  # s, the paper's decimated sample time
@@ -171,17 +174,19 @@ def rk4_parameters(norm: dict[str, Any]) -> RK4Parameters:
     )
 
 
-# Two carriers of one arithmetic: rk4_floats for one nozzle on Python floats (no array
-# overhead), rk4_arrays for a batch in place. Both run the same IEEE operations in the same order
-# on every nozzle, so a nozzle gives the same bits alone and in a batch (tested). The power is
-# numpy's on both carriers (Python's pow differs from it in the last bit). In the Bouc-Wen law,
-# gamma sign(x' w) is written copysign(gamma, x' w), one operation: the same value wherever it
-# matters (at x' w = 0 either x' = 0 or |w|^n = 0 multiplies it away). |w| is floored where
-# |w|^n = 1e-30 (or at 1e-300): the power of an exact zero takes a slow path in numpy, and below
-# the floor 1 - c |w|^n is exactly 1 either way (for |c| = |beta +- gamma| < 1e13).
+# Two carriers of one arithmetic: _rk4_floats_py for one nozzle on Python floats (no array
+# overhead), _rk4_arrays_py for a batch in place. Both run the same IEEE operations in the same
+# order on every nozzle, so a nozzle gives the same bits alone and in a batch (tested); the power
+# is joint_power's, which keeps that promise where the C library's and numpy's differ. The
+# compiled kernel (_joint_kernel.c) runs these operations too, 20-30x faster; rk4_floats and
+# rk4_arrays are it where it was built and gives the reference's bits at import, these otherwise.
+# In the Bouc-Wen law, gamma sign(x' w) is written copysign(gamma, x' w), one operation: the same
+# value wherever it matters (at x' w = 0 either x' = 0 or |w|^n = 0 multiplies it away). |w| is
+# floored where |w|^n = 1e-30 (or at 1e-300), which keeps the power's argument a normal float;
+# below the floor 1 - c |w|^n is exactly 1 either way (for |c| = |beta +- gamma| < 1e13).
 
 
-def rk4_floats(
+def _rk4_floats_py(
     x: float, v: float, w: float, tau: float, h: float, steps: int, p: RK4Parameters
 ) -> tuple[float, float, float]:
     """``steps`` RK4 steps of length h (s) of one nozzle under the torque tau (N m), held.
@@ -202,31 +207,31 @@ def rk4_floats(
             dx = sixth * ((v2 + v3) * 2.0 + v + v4)
             x, v, w = dx + x, sixth * ((a2 + a3) * 2.0 + a1 + a4) + v, dx + w
         return x, v, w
-    power, copysign = np.power, math.copysign
+    power, copysign = power_float, math.copysign
     # The Bouc-Wen rate v (1 - (beta + gamma sign(v w)) |w|^n) written out at each stage: a
     # function call per stage would cost a tenth of the step. max(|w|, floor) is spelled as
     # the builtin decides (its first argument unless the second is strictly larger, NaN kept).
     for _ in range(steps):
         a1 = accel0 - b_j * v - k_el_j * x - k_hys_j * w
         aw = abs(w)
-        w1 = v * (1.0 - (copysign(gamma, v * w) + beta) * float(power(floor if floor > aw else aw, n)))
+        w1 = v * (1.0 - (copysign(gamma, v * w) + beta) * power(floor if floor > aw else aw, n))
         x2, v2, w2 = half * v + x, half * a1 + v, half * w1 + w
         a2 = accel0 - b_j * v2 - k_el_j * x2 - k_hys_j * w2
         aw = abs(w2)
         w2_rate = v2 * (
-            1.0 - (copysign(gamma, v2 * w2) + beta) * float(power(floor if floor > aw else aw, n))
+            1.0 - (copysign(gamma, v2 * w2) + beta) * power(floor if floor > aw else aw, n)
         )
         x3, v3, w3 = half * v2 + x, half * a2 + v, half * w2_rate + w
         a3 = accel0 - b_j * v3 - k_el_j * x3 - k_hys_j * w3
         aw = abs(w3)
         w3_rate = v3 * (
-            1.0 - (copysign(gamma, v3 * w3) + beta) * float(power(floor if floor > aw else aw, n))
+            1.0 - (copysign(gamma, v3 * w3) + beta) * power(floor if floor > aw else aw, n)
         )
         x4, v4, w4 = h * v3 + x, h * a3 + v, h * w3_rate + w
         a4 = accel0 - b_j * v4 - k_el_j * x4 - k_hys_j * w4
         aw = abs(w4)
         w4_rate = v4 * (
-            1.0 - (copysign(gamma, v4 * w4) + beta) * float(power(floor if floor > aw else aw, n))
+            1.0 - (copysign(gamma, v4 * w4) + beta) * power(floor if floor > aw else aw, n)
         )
         x = sixth * ((v2 + v3) * 2.0 + v + v4) + x
         v = sixth * ((a2 + a3) * 2.0 + a1 + a4) + v
@@ -234,9 +239,9 @@ def rk4_floats(
     return x, v, w
 
 
-def rk4_arrays(state: np.ndarray, tau: np.ndarray | float, h: float, steps: int, p: RK4Parameters) -> None:
+def _rk4_arrays_py(state: np.ndarray, tau: np.ndarray | float, h: float, steps: int, p: RK4Parameters) -> None:
     """``steps`` RK4 steps of N nozzles in place: ``state`` (3, N) rows x (rad), v (rad/s), w
-    (rad), torques tau (N,) in N m held over the steps; the arithmetic of :func:`rk4_floats`."""
+    (rad), torques tau (N,) in N m held over the steps; the arithmetic of :func:`_rk4_floats_py`."""
     n = state.shape[1]
     rates = np.empty((4, 3, n))  # the four RK4 stages' derivatives of (x, v, w)
     stage = np.empty((3, n))
@@ -266,7 +271,7 @@ def rk4_arrays(state: np.ndarray, tau: np.ndarray | float, h: float, steps: int,
         np.add(coef, p.beta, out=coef)
         np.abs(w, out=tmp)
         np.maximum(tmp, floor, out=tmp)
-        np.power(tmp, p.n, out=tmp)
+        tmp[...] = power_array(tmp, p.n)
         np.multiply(coef, tmp, out=coef)
         np.subtract(1.0, coef, out=coef)
         np.multiply(v, coef, out=w_rate)
@@ -285,8 +290,62 @@ def rk4_arrays(state: np.ndarray, tau: np.ndarray | float, h: float, steps: int,
         state += stage
 
 
+def _load_kernel() -> Any:
+    """The compiled kernel where it was built and gives the references' bits on a check set
+    (both joints, both carriers, NaN and inf included); None otherwise, with a warning where it
+    was built but differs (a compiler that fused or reordered operations)."""
+    try:
+        from ssme_envs.models import _joint_kernel  # type: ignore[attr-defined]
+    except ImportError:
+        return None
+    _joint_kernel.set_tables(*tables())
+    states = np.array([[0.01, -0.03, 0.0, 0.05, np.nan], [0.5, -2.0, 0.0, -3.0, 0.0], [0.02, 0.01, 0.0, -0.02, 0.0]])
+    tau = np.array([120.0, -900.0, 0.0, 3.0e4, 1.0])
+    strong = rk4_parameters(strong_nozzle().normalized())
+    powers = [(x, n) for x in (1e-300, 0.03, 1.0, 7.5, math.inf, math.nan) for n in (0.99, 1.5)]
+    same = [_joint_kernel.power(x, n) == power_float(x, n) for x, n in powers[:-2]]
+    same.extend(math.isnan(_joint_kernel.power(x, n)) for x, n in powers[-2:])
+    for p in (strong, strong._replace(n=0.99), strong._replace(hysteretic=False)):
+        batch, expected = states.copy(), states.copy()
+        _joint_kernel.rk4_batch(batch, tau, 0.002, 3, p)
+        _rk4_arrays_py(expected, tau, 0.002, 3, p)
+        floats = [_joint_kernel.rk4_float(*col, t, 0.002, 3, p) for col, t in zip(states.T.tolist(), tau.tolist())]
+        ok = all(same) and np.array_equal(batch, expected, equal_nan=True) and np.array_equal(
+            np.array(floats).T, expected, equal_nan=True
+        )
+        if not ok:
+            warnings.warn(
+                "ssme_envs: the compiled nozzle kernel differs from its reference and is not used "
+                "(rebuild without fast-math or fused multiply-add)",
+                RuntimeWarning,
+                stacklevel=2,
+            )
+            return None
+    return _joint_kernel
+
+
+_KERNEL = _load_kernel()
+KERNEL = "python" if _KERNEL is None else "compiled"  # which arithmetic rk4_floats and rk4_arrays run
+# One nozzle's RK4: (x, v, w, tau, h, steps, p) -> (x, v, w), as _rk4_floats_py (a C function
+# where the kernel is used: no Python frame per call).
+rk4_floats: Callable[..., tuple[float, float, float]] = _rk4_floats_py if _KERNEL is None else _KERNEL.rk4_float
+
+
+def rk4_arrays(state: np.ndarray, tau: np.ndarray | float, h: float, steps: int, p: RK4Parameters) -> None:
+    """``steps`` RK4 steps of N nozzles in place: ``state`` (3, N) rows x (rad), v (rad/s), w
+    (rad), torques tau (N,) in N m held over the steps; the arithmetic of :func:`rk4_floats`."""
+    if _KERNEL is not None:
+        try:
+            _KERNEL.rk4_batch(state, tau, h, steps, p)
+            return
+        except TypeError:  # a layout it does not take (a strided view): the reference, the same bits
+            pass
+    _rk4_arrays_py(state, tau, h, steps, p)
+
+
 __all__ = [
     "BENCH_RATE_HZ",
+    "KERNEL",
     "DEFAULT_SUBSTEPS",
     "DEFAULT_TORQUE_LIMIT",
     "NOZZLE_DT",

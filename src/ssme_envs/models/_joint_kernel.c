@@ -1,0 +1,391 @@
+/* The nozzle joint's RK4, compiled: the operations of nozzle_joint.rk4_floats (one nozzle) and
+ * nozzle_joint.rk4_arrays (a batch), in their order, with the power of joint_power.py.
+ *
+ * Every result is a chain of IEEE additions, multiplications, divisions, copysign, fabs,
+ * comparisons and exact bit moves: built with -ffp-contract=off (no fused multiply-add) and
+ * without -ffast-math, the scalar code and each SIMD width give the same bits as the Python
+ * reference. The package checks that at import (nozzle_joint._kernel) and the tests check it
+ * bit for bit; a build that differs is not used.
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#include <math.h>
+#include <stdint.h>
+#include <string.h>
+
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__linux__)
+#define CLONES __attribute__((target_clones("avx512f", "avx2", "default")))
+#else
+#define CLONES
+#endif
+
+#define BLOCK 128
+
+static inline double from_bits(uint64_t u) { double d; memcpy(&d, &u, sizeof d); return d; }
+static inline uint64_t to_bits(double d) { uint64_t u; memcpy(&u, &d, sizeof u); return u; }
+
+/* joint_power.tables(), set once by set_tables before any use */
+static double inv_c[128], log_c[128], exp2_table[64];
+static int tables_set = 0;
+
+static int check_tables(void)
+{
+    if (!tables_set)
+        PyErr_SetString(PyExc_RuntimeError, "set_tables first");
+    return tables_set ? 0 : -1;
+}
+
+/* joint_power.power_float: x^n for a positive normal x (inf and NaN returned as they are) */
+static inline double joint_power(double x, double n)
+{
+    const double round = 6755399441055744.0;        /* 1.5 2^52 */
+    const double two52 = 4503599627370496.0;         /* 2^52 */
+    const double ln2_hi = 0x1.62e42feep-1, ln2_lo = 0x1.a39ef35793c76p-33;
+    const double step_hi = 0x1.62e42feep-7, step_lo = 0x1.a39ef35793c76p-39; /* log(2)/64 */
+    const double inv_step = 0x1.71547652b82fep6, y_limit = 800.0;           /* 64/log(2) */
+    int finite = x <= 0x1.fffffffffffffp1023;
+    uint64_t bits = to_bits(finite ? x : 1.0);
+    uint64_t mantissa = bits & 0x000fffffffffffffULL;
+    uint64_t i = mantissa >> 45;
+    double m = from_bits(mantissa | 0x3ff0000000000000ULL);
+    double c = from_bits((mantissa & 0x000fe00000000000ULL) | 0x3ff0100000000000ULL); /* 1 + (i + 1/2)/128 */
+    double e = from_bits((bits >> 52) | 0x4330000000000000ULL) - (two52 + 1023.0);
+    double r = (m - c) * inv_c[i];
+    double log1p = r + r * r * (-0.5 + r * (0x1.5555555555555p-2 + r * (-0.25 + r * (0.2 + r * -0x1.5555555555555p-3))));
+    double y = n * ((e * ln2_hi + log_c[i]) + (e * ln2_lo + log1p));
+    y = y < -y_limit ? -y_limit : (y > y_limit ? y_limit : y);
+    double t = y * inv_step + round;
+    double k = t - round;
+    r = (y - k * step_hi) - k * step_lo;
+    uint64_t j = to_bits(t) & 63;
+    double q = (k - (from_bits(j | 0x4330000000000000ULL) - two52)) * 0.015625;
+    double expm1 = r + r * r * (0.5 + r * (0x1.5555555555555p-3 + r * (0x1.5555555555555p-5 + r * 0x1.1111111111111p-7)));
+    double s = exp2_table[j];
+    double q1 = (q * 0.5 - 0.25 + round) - round;
+    /* 2^j as bits: j + 1023 sits in the low bits of (j + 1023) + 2^52, exactly */
+    double s1 = from_bits(to_bits(q1 + (two52 + 1023.0)) << 52);
+    double s2 = from_bits(to_bits((q - q1) + (two52 + 1023.0)) << 52);
+    double out = ((s * expm1 + s) * s1) * s2;
+    return finite ? out : x;
+}
+
+typedef struct {
+    double inv_j, b_j, k_el_j, k_hys_j, beta, gamma, n, floor;
+} Joint;
+
+/* v (1 - (gamma sign(v w) + beta) max(|w|, floor)^n), as rk4_floats spells it */
+static inline double bouc_wen_rate(double v, double w, const Joint *p)
+{
+    double aw = fabs(w);
+    return v * (1.0 - (copysign(p->gamma, v * w) + p->beta) * joint_power(p->floor > aw ? p->floor : aw, p->n));
+}
+
+/* one RK4 step of length h of one linear nozzle (w moves as x does); accel0 = tau / J */
+static inline void rk4_step_linear(double *px, double *pv, double *pw, double accel0, double h, const Joint *p)
+{
+    double x = *px, v = *pv, w = *pw;
+    double half = 0.5 * h, sixth = h / 6.0;
+    double a1 = accel0 - p->b_j * v - p->k_el_j * x - p->k_hys_j * w;
+    double x2 = half * v + x, v2 = half * a1 + v, w2 = half * v + w;
+    double a2 = accel0 - p->b_j * v2 - p->k_el_j * x2 - p->k_hys_j * w2;
+    double x3 = half * v2 + x, v3 = half * a2 + v, w3 = half * v2 + w;
+    double a3 = accel0 - p->b_j * v3 - p->k_el_j * x3 - p->k_hys_j * w3;
+    double x4 = h * v3 + x, v4 = h * a3 + v, w4 = h * v3 + w;
+    double a4 = accel0 - p->b_j * v4 - p->k_el_j * x4 - p->k_hys_j * w4;
+    double dx = sixth * ((v2 + v3) * 2.0 + v + v4);
+    *px = dx + x;
+    *pv = sixth * ((a2 + a3) * 2.0 + a1 + a4) + v;
+    *pw = dx + w;
+}
+
+/* one RK4 step of length h of one Bouc-Wen nozzle; accel0 = tau / J */
+static inline void rk4_step_hysteretic(double *px, double *pv, double *pw, double accel0, double h,
+                                       const Joint *p)
+{
+    double x = *px, v = *pv, w = *pw;
+    double half = 0.5 * h, sixth = h / 6.0;
+    double a1 = accel0 - p->b_j * v - p->k_el_j * x - p->k_hys_j * w;
+    double r1 = bouc_wen_rate(v, w, p);
+    double x2 = half * v + x, v2 = half * a1 + v, w2 = half * r1 + w;
+    double a2 = accel0 - p->b_j * v2 - p->k_el_j * x2 - p->k_hys_j * w2;
+    double r2 = bouc_wen_rate(v2, w2, p);
+    double x3 = half * v2 + x, v3 = half * a2 + v, w3 = half * r2 + w;
+    double a3 = accel0 - p->b_j * v3 - p->k_el_j * x3 - p->k_hys_j * w3;
+    double r3 = bouc_wen_rate(v3, w3, p);
+    double x4 = h * v3 + x, v4 = h * a3 + v, w4 = h * r3 + w;
+    double a4 = accel0 - p->b_j * v4 - p->k_el_j * x4 - p->k_hys_j * w4;
+    double r4 = bouc_wen_rate(v4, w4, p);
+    *px = sixth * ((v2 + v3) * 2.0 + v + v4) + x;
+    *pv = sixth * ((a2 + a3) * 2.0 + a1 + a4) + v;
+    *pw = sixth * ((r2 + r3) * 2.0 + r1 + r4) + w;
+}
+
+/* `steps` RK4 steps of `len` (<= BLOCK) nozzles: state rows x, v, w; per-nozzle values in
+ * rows of `cols` (tau and the joint's eight parameters); steps outermost and one loop per joint
+ * kind, so that the loop over nozzles is the one the compiler vectorizes */
+static void CLONES rk4_block(double *restrict x, double *restrict v, double *restrict w,
+                             double (*restrict cols)[BLOCK], Py_ssize_t len, double h, long steps, int hys)
+{
+    double accel0[BLOCK];
+    for (Py_ssize_t i = 0; i < len; i++)
+        accel0[i] = cols[0][i] * cols[1][i];
+#define JOINT_AT(i) {cols[1][i], cols[2][i], cols[3][i], cols[4][i], cols[5][i], cols[6][i], cols[7][i], cols[8][i]}
+    if (hys) {
+        /* rk4_step_hysteretic's operations, one loop per RK4 stage (one power each) with the
+         * stage values kept in L1 between loops: a fused loop of four powers spills registers */
+        double acc[4][BLOCK], rate[4][BLOCK], vel[4][BLOCK], xs[BLOCK], ws[BLOCK];
+        const double half = 0.5 * h, sixth = h / 6.0;
+        for (long s = 0; s < steps; s++) {
+            for (int k = 0; k < 4; k++) {
+                const double *xk = k ? xs : x, *vk = k ? vel[k] : v, *wk = k ? ws : w;
+                for (Py_ssize_t i = 0; i < len; i++) {
+                    Joint p = JOINT_AT(i);
+                    double xi = xk[i], vi = vk[i], wi = wk[i];
+                    acc[k][i] = accel0[i] - p.b_j * vi - p.k_el_j * xi - p.k_hys_j * wi;
+                    rate[k][i] = bouc_wen_rate(vi, wi, &p);
+                }
+                if (k == 0)
+                    memcpy(vel[0], v, (size_t)len * sizeof(double));
+                if (k < 3) {
+                    const double weight = k < 2 ? half : h;
+                    for (Py_ssize_t i = 0; i < len; i++) {
+                        xs[i] = weight * vel[k][i] + x[i];
+                        vel[k + 1][i] = weight * acc[k][i] + v[i];
+                        ws[i] = weight * rate[k][i] + w[i];
+                    }
+                }
+            }
+            for (Py_ssize_t i = 0; i < len; i++) {
+                x[i] = sixth * ((vel[1][i] + vel[2][i]) * 2.0 + vel[0][i] + vel[3][i]) + x[i];
+                v[i] = sixth * ((acc[1][i] + acc[2][i]) * 2.0 + acc[0][i] + acc[3][i]) + v[i];
+                w[i] = sixth * ((rate[1][i] + rate[2][i]) * 2.0 + rate[0][i] + rate[3][i]) + w[i];
+            }
+        }
+    } else {
+        for (long s = 0; s < steps; s++)
+            for (Py_ssize_t i = 0; i < len; i++) {
+                Joint p = JOINT_AT(i);
+                rk4_step_linear(&x[i], &v[i], &w[i], accel0[i], h, &p);
+            }
+    }
+#undef JOINT_AT
+}
+
+/* A number, or a contiguous float64 vector of length n: its values into col (length len from
+ * offset start) */
+typedef struct {
+    double value;
+    Py_buffer view;
+    int is_view;
+} Column;
+
+static int column_open(PyObject *obj, Py_ssize_t n, Column *col, const char *name)
+{
+    col->is_view = 0;
+    if (PyFloat_Check(obj) || PyLong_Check(obj)) {
+        col->value = PyFloat_AsDouble(obj);
+        return (col->value == -1.0 && PyErr_Occurred()) ? -1 : 0;
+    }
+    if (PyObject_GetBuffer(obj, &col->view, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0) {
+        PyErr_Clear();
+        PyErr_Format(PyExc_TypeError, "%s: a number or a contiguous float64 vector", name);
+        return -1;
+    }
+    col->is_view = 1;
+    if (col->view.ndim == 0 && strcmp(col->view.format, "d") == 0) {
+        col->value = *(double *)col->view.buf;
+        PyBuffer_Release(&col->view);
+        col->is_view = 0;
+        return 0;
+    }
+    if (col->view.ndim != 1 || col->view.shape[0] != n || strcmp(col->view.format, "d") != 0) {
+        PyBuffer_Release(&col->view);
+        col->is_view = 0;
+        PyErr_Format(PyExc_TypeError, "%s: a number or a float64 vector of length %zd", name, n);
+        return -1;
+    }
+    return 0;
+}
+
+static void column_fill(const Column *col, double *dst, Py_ssize_t start, Py_ssize_t len)
+{
+    if (col->is_view)
+        memcpy(dst, (const double *)col->view.buf + start, (size_t)len * sizeof(double));
+    else
+        for (Py_ssize_t i = 0; i < len; i++)
+            dst[i] = col->value;
+}
+
+static int read_joint(PyObject *p, PyObject **items, int *hys)
+{
+    if (!PyTuple_Check(p) || PyTuple_GET_SIZE(p) != 9) {
+        PyErr_SetString(PyExc_TypeError, "p: the nine RK4Parameters");
+        return -1;
+    }
+    for (int i = 0; i < 8; i++)
+        items[i] = PyTuple_GET_ITEM(p, i);
+    *hys = PyObject_IsTrue(PyTuple_GET_ITEM(p, 8));
+    return *hys < 0 ? -1 : 0;
+}
+
+static double number(PyObject *obj, int *err)
+{
+    double value = PyFloat_AsDouble(obj);
+    if (value == -1.0 && PyErr_Occurred())
+        *err = 1;
+    return value;
+}
+
+/* rk4_float(x, v, w, tau, h, steps, p) -> (x, v, w) */
+static PyObject *rk4_float(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (nargs != 7) {
+        PyErr_SetString(PyExc_TypeError, "rk4_float(x, v, w, tau, h, steps, p)");
+        return NULL;
+    }
+    if (check_tables() < 0)
+        return NULL;
+    PyObject *items[8];
+    int hys, err = 0;
+    if (read_joint(args[6], items, &hys) < 0)
+        return NULL;
+    double x = number(args[0], &err), v = number(args[1], &err), w = number(args[2], &err);
+    double tau = number(args[3], &err), h = number(args[4], &err);
+    long steps = PyLong_AsLong(args[5]);
+    if (steps == -1 && PyErr_Occurred())
+        return NULL;
+    Joint p;
+    double *fields[8] = {&p.inv_j, &p.b_j, &p.k_el_j, &p.k_hys_j, &p.beta, &p.gamma, &p.n, &p.floor};
+    for (int i = 0; i < 8; i++)
+        *fields[i] = number(items[i], &err);
+    if (err)
+        return NULL;
+    double accel0 = tau * p.inv_j;
+    if (hys)
+        for (long s = 0; s < steps; s++)
+            rk4_step_hysteretic(&x, &v, &w, accel0, h, &p);
+    else
+        for (long s = 0; s < steps; s++)
+            rk4_step_linear(&x, &v, &w, accel0, h, &p);
+    PyObject *out = PyTuple_New(3);
+    if (out == NULL)
+        return NULL;
+    PyObject *values[3] = {PyFloat_FromDouble(x), PyFloat_FromDouble(v), PyFloat_FromDouble(w)};
+    for (int i = 0; i < 3; i++) {
+        if (values[i] == NULL) {
+            Py_DECREF(out);
+            return NULL;
+        }
+        PyTuple_SET_ITEM(out, i, values[i]);
+    }
+    return out;
+}
+
+/* rk4_batch(state, tau, h, steps, p): state a C-contiguous float64 (3, N) array, in place */
+static PyObject *rk4_batch(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (nargs != 5) {
+        PyErr_SetString(PyExc_TypeError, "rk4_batch(state, tau, h, steps, p)");
+        return NULL;
+    }
+    if (check_tables() < 0)
+        return NULL;
+    PyObject *items[8];
+    int hys, err = 0;
+    if (read_joint(args[4], items, &hys) < 0)
+        return NULL;
+    double h = number(args[2], &err);
+    long steps = PyLong_AsLong(args[3]);
+    if (err || (steps == -1 && PyErr_Occurred()))
+        return NULL;
+    Py_buffer state;
+    if (PyObject_GetBuffer(args[0], &state, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | PyBUF_WRITABLE) < 0) {
+        PyErr_Clear();
+        PyErr_SetString(PyExc_TypeError, "state: a writable C-contiguous float64 (3, N) array");
+        return NULL;
+    }
+    if (state.ndim != 2 || state.shape[0] != 3 || strcmp(state.format, "d") != 0) {
+        PyBuffer_Release(&state);
+        PyErr_SetString(PyExc_TypeError, "state: a writable C-contiguous float64 (3, N) array");
+        return NULL;
+    }
+    Py_ssize_t n = state.shape[1];
+    Column cols[9];
+    int opened = 0;
+    static const char *names[9] = {"tau", "inv_j", "b_j", "k_el_j", "k_hys_j", "beta", "gamma", "n", "w_floor"};
+    for (; opened < 9; opened++)
+        if (column_open(opened == 0 ? args[1] : items[opened - 1], n, &cols[opened], names[opened]) < 0)
+            break;
+    if (opened == 9) {
+        double *rows = (double *)state.buf;
+        double block[9][BLOCK];
+        for (Py_ssize_t start = 0; start < n; start += BLOCK) {
+            Py_ssize_t len = n - start < BLOCK ? n - start : BLOCK;
+            for (int c = 0; c < 9; c++)
+                column_fill(&cols[c], block[c], start, len);
+            rk4_block(rows + start, rows + n + start, rows + 2 * n + start, block, len, h, steps, hys);
+        }
+    }
+    for (int c = 0; c < opened; c++)
+        if (cols[c].is_view)
+            PyBuffer_Release(&cols[c].view);
+    PyBuffer_Release(&state);
+    if (opened != 9)
+        return NULL;
+    Py_RETURN_NONE;
+}
+
+static int fill(PyObject *seq, double *dst, Py_ssize_t n)
+{
+    PyObject *fast = PySequence_Fast(seq, "a sequence of floats");
+    if (fast == NULL)
+        return -1;
+    int ok = PySequence_Fast_GET_SIZE(fast) == n;
+    for (Py_ssize_t i = 0; ok && i < n; i++) {
+        dst[i] = PyFloat_AsDouble(PySequence_Fast_GET_ITEM(fast, i));
+        ok = !(dst[i] == -1.0 && PyErr_Occurred());
+    }
+    Py_DECREF(fast);
+    if (!ok && !PyErr_Occurred())
+        PyErr_Format(PyExc_ValueError, "a table of %zd floats", n);
+    return ok ? 0 : -1;
+}
+
+/* set_tables(inv_c, log_c, exp2): joint_power.tables(), once */
+static PyObject *set_tables(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (nargs != 3) {
+        PyErr_SetString(PyExc_TypeError, "set_tables(inv_c, log_c, exp2)");
+        return NULL;
+    }
+    if (fill(args[0], inv_c, 128) < 0 || fill(args[1], log_c, 128) < 0 || fill(args[2], exp2_table, 64) < 0)
+        return NULL;
+    tables_set = 1;
+    Py_RETURN_NONE;
+}
+
+/* power(x, n): joint_power on one float, for the tests */
+static PyObject *power(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    int err = 0;
+    if (nargs != 2) {
+        PyErr_SetString(PyExc_TypeError, "power(x, n)");
+        return NULL;
+    }
+    if (check_tables() < 0)
+        return NULL;
+    double x = number(args[0], &err), n = number(args[1], &err);
+    return err ? NULL : PyFloat_FromDouble(joint_power(x, n));
+}
+
+static PyMethodDef methods[] = {
+    {"rk4_float", (PyCFunction)(void (*)(void))rk4_float, METH_FASTCALL, "RK4 steps of one nozzle."},
+    {"rk4_batch", (PyCFunction)(void (*)(void))rk4_batch, METH_FASTCALL, "RK4 steps of N nozzles, in place."},
+    {"set_tables", (PyCFunction)(void (*)(void))set_tables, METH_FASTCALL, "The power's tables."},
+    {"power", (PyCFunction)(void (*)(void))power, METH_FASTCALL, "The joint's power on one float."},
+    {NULL, NULL, 0, NULL},
+};
+
+static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_joint_kernel", NULL, -1, methods};
+
+PyMODINIT_FUNC PyInit__joint_kernel(void) { return PyModule_Create(&module); }
