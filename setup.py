@@ -9,9 +9,11 @@ class BuildExt(build_ext):
     """Flags per compiler: the kernel's bits rely on no fused multiply-add and no fast math."""
 
     def build_extensions(self) -> None:
-        flags = ["/O2", "/fp:precise"] if self.compiler.compiler_type == "msvc" else [
-            "-O3", "-ffp-contract=off", "-fno-fast-math", "-fno-trapping-math", "-std=c99"
-        ]
+        flags = (
+            ["/O2", "/fp:precise"]
+            if self.compiler.compiler_type == "msvc"
+            else ["-O3", "-ffp-contract=off", "-fno-fast-math", "-fno-trapping-math", "-std=c99"]
+        )
         for ext in self.extensions:
             ext.extra_compile_args = flags
         super().build_extensions()

@@ -46,6 +46,7 @@ INV_STEP = float.fromhex("0x1.71547652b82fep6")  # 64/log(2) rounded: it only pi
 STEP_HI, STEP_LO = LN2_HI / EXP_STEPS, LN2_LO / EXP_STEPS  # log(2)/64 in two parts (exact scalings)
 Y_LIMIT = 800.0
 _FINITE_MAX = 1.7976931348623157e308
+_SIXTH = 0.16666666666666666
 
 
 @cache
@@ -57,7 +58,10 @@ def tables() -> tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]]:
     return (
         tuple(1.0 / c for c in centres),
         tuple(float(ctx.ln(Decimal(c))) for c in centres),
-        tuple(float(ctx.exp(ctx.multiply(ln2, ctx.divide(Decimal(j), Decimal(EXP_STEPS))))) for j in range(EXP_STEPS)),
+        tuple(
+            float(ctx.exp(ctx.divide(ctx.multiply(ln2, Decimal(j)), Decimal(EXP_STEPS))))
+            for j in range(EXP_STEPS)
+        ),
     )
 
 
@@ -70,14 +74,14 @@ def power_float(x: float, n: float) -> float:
     m, e_f = m + m, float(e - 1)
     i = int((m - 1.0) * 128.0)
     r = (m - (1.0 + (i + 0.5) * 0.0078125)) * inv_c[i]
-    log1p = r + r * r * (-0.5 + r * (0.3333333333333333 + r * (-0.25 + r * (0.2 + r * -0.16666666666666666))))
+    log1p = r + r * r * (-0.5 + r * (0.3333333333333333 + r * (-0.25 + r * (0.2 + r * -_SIXTH))))
     y = n * ((e_f * LN2_HI + log_c[i]) + (e_f * LN2_LO + log1p))
     y = -Y_LIMIT if y < -Y_LIMIT else (Y_LIMIT if y > Y_LIMIT else y)
     k = (y * INV_STEP + ROUND) - ROUND
     r = (y - k * STEP_HI) - k * STEP_LO
     j = int(k) & 63
     q = (k - float(j)) * 0.015625
-    expm1 = r + r * r * (0.5 + r * (0.16666666666666666 + r * (0.041666666666666664 + r * 0.008333333333333333)))
+    expm1 = r + r * r * (0.5 + r * (_SIXTH + r * (0.041666666666666664 + r * 0.008333333333333333)))
     s = exp2[j]
     q1 = (q * 0.5 - 0.25 + ROUND) - ROUND  # floor(q / 2)
     return ((s * expm1 + s) * math.ldexp(1.0, int(q1))) * math.ldexp(1.0, int(q - q1))
@@ -97,13 +101,13 @@ def power_array(x: np.ndarray, n: np.ndarray | float) -> np.ndarray:
     m, e_f = m + m, (e - 1).astype(np.float64)
     i = ((m - 1.0) * 128.0).astype(np.int64)
     r = (m - (1.0 + (i + 0.5) * 0.0078125)) * inv_c[i]
-    log1p = r + r * r * (-0.5 + r * (0.3333333333333333 + r * (-0.25 + r * (0.2 + r * -0.16666666666666666))))
+    log1p = r + r * r * (-0.5 + r * (0.3333333333333333 + r * (-0.25 + r * (0.2 + r * -_SIXTH))))
     y = np.clip(n * ((e_f * LN2_HI + log_c[i]) + (e_f * LN2_LO + log1p)), -Y_LIMIT, Y_LIMIT)
     k = (y * INV_STEP + ROUND) - ROUND
     r = (y - k * STEP_HI) - k * STEP_LO
     j = k.astype(np.int64) & 63
     q = (k - j) * 0.015625
-    expm1 = r + r * r * (0.5 + r * (0.16666666666666666 + r * (0.041666666666666664 + r * 0.008333333333333333)))
+    expm1 = r + r * r * (0.5 + r * (_SIXTH + r * (0.041666666666666664 + r * 0.008333333333333333)))
     s = exp2[j]
     q1 = (q * 0.5 - 0.25 + ROUND) - ROUND
     with np.errstate(over="ignore"):

@@ -218,28 +218,24 @@ def _rk4_floats_py(
         x2, v2, w2 = half * v + x, half * a1 + v, half * w1 + w
         a2 = accel0 - b_j * v2 - k_el_j * x2 - k_hys_j * w2
         aw = abs(w2)
-        w2_rate = v2 * (
-            1.0 - (copysign(gamma, v2 * w2) + beta) * power(floor if floor > aw else aw, n)
-        )
+        w2_rate = v2 * (1.0 - (copysign(gamma, v2 * w2) + beta) * power(floor if floor > aw else aw, n))
         x3, v3, w3 = half * v2 + x, half * a2 + v, half * w2_rate + w
         a3 = accel0 - b_j * v3 - k_el_j * x3 - k_hys_j * w3
         aw = abs(w3)
-        w3_rate = v3 * (
-            1.0 - (copysign(gamma, v3 * w3) + beta) * power(floor if floor > aw else aw, n)
-        )
+        w3_rate = v3 * (1.0 - (copysign(gamma, v3 * w3) + beta) * power(floor if floor > aw else aw, n))
         x4, v4, w4 = h * v3 + x, h * a3 + v, h * w3_rate + w
         a4 = accel0 - b_j * v4 - k_el_j * x4 - k_hys_j * w4
         aw = abs(w4)
-        w4_rate = v4 * (
-            1.0 - (copysign(gamma, v4 * w4) + beta) * power(floor if floor > aw else aw, n)
-        )
+        w4_rate = v4 * (1.0 - (copysign(gamma, v4 * w4) + beta) * power(floor if floor > aw else aw, n))
         x = sixth * ((v2 + v3) * 2.0 + v + v4) + x
         v = sixth * ((a2 + a3) * 2.0 + a1 + a4) + v
         w = sixth * ((w2_rate + w3_rate) * 2.0 + w1 + w4_rate) + w
     return x, v, w
 
 
-def _rk4_arrays_py(state: np.ndarray, tau: np.ndarray | float, h: float, steps: int, p: RK4Parameters) -> None:
+def _rk4_arrays_py(
+    state: np.ndarray, tau: np.ndarray | float, h: float, steps: int, p: RK4Parameters
+) -> None:
     """``steps`` RK4 steps of N nozzles in place: ``state`` (3, N) rows x (rad), v (rad/s), w
     (rad), torques tau (N,) in N m held over the steps; the arithmetic of :func:`_rk4_floats_py`."""
     n = state.shape[1]
@@ -299,7 +295,9 @@ def _load_kernel() -> Any:
     except ImportError:
         return None
     _joint_kernel.set_tables(*tables())
-    states = np.array([[0.01, -0.03, 0.0, 0.05, np.nan], [0.5, -2.0, 0.0, -3.0, 0.0], [0.02, 0.01, 0.0, -0.02, 0.0]])
+    states = np.array(
+        [[0.01, -0.03, 0.0, 0.05, np.nan], [0.5, -2.0, 0.0, -3.0, 0.0], [0.02, 0.01, 0.0, -0.02, 0.0]]
+    )
     tau = np.array([120.0, -900.0, 0.0, 3.0e4, 1.0])
     strong = rk4_parameters(strong_nozzle().normalized())
     powers = [(x, n) for x in (1e-300, 0.03, 1.0, 7.5, math.inf, math.nan) for n in (0.99, 1.5)]
@@ -309,9 +307,12 @@ def _load_kernel() -> Any:
         batch, expected = states.copy(), states.copy()
         _joint_kernel.rk4_batch(batch, tau, 0.002, 3, p)
         _rk4_arrays_py(expected, tau, 0.002, 3, p)
-        floats = [_joint_kernel.rk4_float(*col, t, 0.002, 3, p) for col, t in zip(states.T.tolist(), tau.tolist())]
-        ok = all(same) and np.array_equal(batch, expected, equal_nan=True) and np.array_equal(
-            np.array(floats).T, expected, equal_nan=True
+        columns = zip(states.T.tolist(), tau.tolist(), strict=True)
+        floats = [_joint_kernel.rk4_float(*col, t, 0.002, 3, p) for col, t in columns]
+        ok = (
+            all(same)
+            and np.array_equal(batch, expected, equal_nan=True)
+            and np.array_equal(np.array(floats).T, expected, equal_nan=True)
         )
         if not ok:
             warnings.warn(
@@ -328,7 +329,9 @@ _KERNEL = _load_kernel()
 KERNEL = "python" if _KERNEL is None else "compiled"  # which arithmetic rk4_floats and rk4_arrays run
 # One nozzle's RK4: (x, v, w, tau, h, steps, p) -> (x, v, w), as _rk4_floats_py (a C function
 # where the kernel is used: no Python frame per call).
-rk4_floats: Callable[..., tuple[float, float, float]] = _rk4_floats_py if _KERNEL is None else _KERNEL.rk4_float
+rk4_floats: Callable[..., tuple[float, float, float]] = (
+    _rk4_floats_py if _KERNEL is None else _KERNEL.rk4_float
+)
 
 
 def rk4_arrays(state: np.ndarray, tau: np.ndarray | float, h: float, steps: int, p: RK4Parameters) -> None:
@@ -345,9 +348,9 @@ def rk4_arrays(state: np.ndarray, tau: np.ndarray | float, h: float, steps: int,
 
 __all__ = [
     "BENCH_RATE_HZ",
-    "KERNEL",
     "DEFAULT_SUBSTEPS",
     "DEFAULT_TORQUE_LIMIT",
+    "KERNEL",
     "NOZZLE_DT",
     "NozzleParameters",
     "RK4Parameters",

@@ -1,0 +1,144 @@
+"""The Bouc-Wen power and the nozzle joint's compiled RK4 kernel.
+
+The power is checked against the C library's ``math.pow`` (an independent implementation); its
+two Python carriers and the compiled kernel are held to the same bits, and so is the kernel's
+RK4 against the Python reference that the rest of the package's tests exercise.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import types
+import warnings
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from ssme_envs.models import nozzle_joint
+from ssme_envs.models.joint_power import power_array, power_float
+from ssme_envs.models.nozzle_joint import NozzleParameters, rk4_parameters
+
+compiled = pytest.mark.skipif(nozzle_joint._KERNEL is None, reason="the compiled kernel is not built here")
+
+bases = st.floats(min_value=1e-300, max_value=1e300, allow_nan=False, allow_infinity=False)
+exponents = st.floats(min_value=0.05, max_value=5.0)
+nozzles = st.builds(
+    NozzleParameters,
+    J=st.floats(5.0, 50.0),
+    b=st.floats(0.0, 800.0),
+    k=st.floats(2e4, 2e5),
+    a=st.floats(0.1, 1.0),
+    A=st.just(1.0),
+    beta=st.floats(0.0, 150.0),
+    gamma=st.floats(0.0, 150.0),
+    n=st.floats(0.5, 2.0),
+)
+joint_states = st.tuples(st.floats(-0.05, 0.05), st.floats(-2.0, 2.0), st.floats(-0.05, 0.05))
+
+
+@settings(max_examples=300, deadline=None)
+@given(x=bases, n=exponents)
+def test_power_is_within_a_few_ulps_of_the_c_library(x: float, n: float) -> None:
+    y = n * math.log(x)
+    if not -700.0 < y < 700.0:  # the result over- or underflows: its own test below
+        return
+    exact = math.pow(x, n)
+    # a few ulps plus |y| ulps from rounding y = n log x (the module's bound)
+    assert abs(power_float(x, n) - exact) <= 3.0 * (1.0 + abs(y)) * 2.0**-53 * exact
+
+
+@settings(max_examples=200, deadline=None)
+@given(xs=st.lists(bases, min_size=1, max_size=40), n=exponents)
+def test_power_gives_the_same_bits_on_floats_and_on_arrays(xs: list[float], n: float) -> None:
+    array = power_array(np.array(xs), n)
+    assert [power_float(x, n) for x in xs] == array.tolist()
+
+
+def test_power_keeps_inf_and_nan_and_saturates_at_the_ends() -> None:
+    assert power_float(math.inf, 1.5) == math.inf
+    assert math.isnan(power_float(math.nan, 1.5))
+    out = power_array(np.array([math.inf, math.nan, 1e-300, 1e300]), 3.0)
+    assert out[0] == math.inf and math.isnan(out[1]) and out[2] == 0.0 and out[3] == math.inf
+    assert power_float(1.0, 0.99) == 1.0 and power_float(4.0, 0.5) == 2.0
+
+
+@compiled
+@settings(max_examples=300, deadline=None)
+@given(x=bases, n=exponents)
+def test_kernel_power_has_the_reference_bits(x: float, n: float) -> None:
+    assert nozzle_joint._KERNEL.power(x, n) == power_float(x, n)
+
+
+@compiled
+@settings(max_examples=150, deadline=None)
+@given(nozzle=nozzles, state=joint_states, tau=st.floats(-3e4, 3e4), steps=st.integers(1, 6))
+def test_kernel_rk4_float_has_the_reference_bits(nozzle, state, tau, steps) -> None:
+    for p in (
+        rk4_parameters(nozzle.normalized()),
+        rk4_parameters(nozzle.normalized())._replace(hysteretic=False),
+    ):
+        assert nozzle_joint._KERNEL.rk4_float(*state, tau, 0.002, steps, p) == nozzle_joint._rk4_floats_py(
+            *state, tau, 0.002, steps, p
+        )
+
+
+@compiled
+@settings(max_examples=40, deadline=None)
+@given(
+    plants=st.lists(st.tuples(nozzles, joint_states, st.floats(-3e4, 3e4)), min_size=1, max_size=300),
+    steps=st.integers(1, 4),
+    shared=st.booleans(),
+)
+def test_kernel_rk4_batch_has_the_reference_bits(plants, steps, shared) -> None:
+    """Per-nozzle parameters (drawn plants) or one joint for all, across the kernel's blocks."""
+    norms = [nozzle.normalized() for nozzle, _, _ in plants]
+    if shared:
+        p = rk4_parameters(norms[0])
+    else:
+        p = rk4_parameters({key: np.array([norm[key] for norm in norms]) for key in norms[0]})
+    state = np.array([s for _, s, _ in plants]).T.copy()
+    tau = np.array([t for _, _, t in plants])
+    for params in (p, p._replace(hysteretic=False)):
+        kernel, reference = state.copy(), state.copy()
+        nozzle_joint._KERNEL.rk4_batch(kernel, tau, 0.002, steps, params)
+        nozzle_joint._rk4_arrays_py(reference, tau, 0.002, steps, params)
+        assert np.array_equal(kernel, reference, equal_nan=True)
+        one = rk4_parameters(norms[0])._replace(hysteretic=params.hysteretic)
+        if shared:  # and each nozzle alone on floats
+            alone = [nozzle_joint.rk4_floats(*s, t, 0.002, steps, one) for _, s, t in plants]
+            assert np.array_equal(np.array(alone).T, kernel)
+
+
+def test_rk4_arrays_takes_a_strided_state_through_the_reference_with_the_same_bits() -> None:
+    p = rk4_parameters(
+        NozzleParameters(J=20.0, b=250.0, k=1.6e5, a=0.15, beta=120.0, gamma=80.0, n=1.5).normalized()
+    )
+    wide = np.zeros((3, 8))
+    wide[:, ::2] = [[0.01, -0.02, 0.0, 0.03], [0.3, -1.0, 0.0, 0.2], [0.01, 0.0, -0.01, 0.02]]
+    strided, contiguous = wide[:, ::2], wide[:, ::2].copy()
+    tau = np.array([100.0, -5e3, 0.0, 2e4])
+    nozzle_joint.rk4_arrays(strided, tau, 0.002, 3, p)
+    nozzle_joint.rk4_arrays(contiguous, tau, 0.002, 3, p)
+    assert np.array_equal(strided, contiguous)
+    assert not np.array_equal(contiguous, wide[:, 1::2])  # it moved
+
+
+def test_a_kernel_that_differs_from_the_reference_is_refused(monkeypatch) -> None:
+    """A build that fused or reordered operations (one ulp off) is not used, with a warning."""
+    real = nozzle_joint._KERNEL or types.SimpleNamespace(set_tables=lambda *a: None)
+    fake = types.ModuleType("ssme_envs.models._joint_kernel")
+    fake.set_tables = real.set_tables
+    fake.power = lambda x, n: math.nextafter(power_float(x, n), math.inf)
+    fake.rk4_float = nozzle_joint._rk4_floats_py
+    fake.rk4_batch = nozzle_joint._rk4_arrays_py
+    monkeypatch.setitem(sys.modules, "ssme_envs.models._joint_kernel", fake)
+    monkeypatch.setattr(sys.modules["ssme_envs.models"], "_joint_kernel", fake, raising=False)
+    with pytest.warns(RuntimeWarning, match="differs from its reference"):
+        assert nozzle_joint._load_kernel() is None
+    fake.power = power_float  # the same bits: taken
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert nozzle_joint._load_kernel() is fake
