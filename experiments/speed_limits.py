@@ -1,14 +1,13 @@
 """What the env contract leaves of the speed floors of ``ssme-envs bench``.
 
-Two promises of the envs cost time no implementation can remove: an env gives the same bits
-alone and in a batch (so the float step and the array step use one power function, whose
-bits both carriers must reproduce: today numpy's SIMD ``np.power``), and the native vector env
-equals gymnasium's ``SyncVectorEnv`` (so each sub-env draws its episodes from its own
-generator: one generator call per restart). This script measures those costs beside
-Pendulum-v1 and CartPole-v1's native vector env in the same run, and gives the best ratio each
-env could reach were everything else in its step free, with today's power function and with
-the C library's (``math.pow`` on floats, ``np.float_power`` on arrays: the same bits, measured
-here too).
+Two promises of the envs cost time: an env gives the same bits alone and in a batch (so the
+float step and the array step share one power function: the joint's own,
+:mod:`ssme_envs.models.joint_power`, compiled with the joint's RK4 in ``_joint_kernel.c``), and
+the native vector env equals gymnasium's ``SyncVectorEnv`` (so each sub-env draws its episodes
+from its own generator: one generator call per restart). This script measures the joint's RK4
+(compiled kernel and Python reference) and those calls beside Pendulum-v1 and CartPole-v1's
+native vector env in the same run, and gives the best ratio each env could reach were
+everything else in its step free.
 
     python experiments/speed_limits.py [--rounds 5]
 
@@ -18,7 +17,6 @@ Writes experiments/results/speed_limits.md.
 from __future__ import annotations
 
 import argparse
-import math
 import timeit
 from pathlib import Path
 
@@ -30,7 +28,8 @@ from ssme_envs import bench
 from ssme_envs.envs import catalogue
 from ssme_envs.envs.launcher_pitch import LauncherTask
 from ssme_envs.envs.nozzle_task import NozzleTask
-from ssme_envs.models.nozzle import NozzleParameters, rk4_floats, rk4_parameters
+from ssme_envs.models import nozzle_joint
+from ssme_envs.models.nozzle import NozzleParameters, rk4_arrays, rk4_floats, rk4_parameters
 from ssme_envs.outputs import write_text
 
 RESULTS = Path(__file__).resolve().parent / "results" / "speed_limits.md"
@@ -48,34 +47,6 @@ def _best(run, steps: int, rounds: int) -> float:
     return min(run(steps) for _ in range(rounds)) / steps
 
 
-def power_costs(exponent: float, rounds: int) -> dict[str, float]:
-    """Seconds per power: on one Python float (numpy's SIMD loop, the C library's pow) and per
-    element of an (N,) array (the same two); and the share of |w| in [0, 0.1) rad on which
-    the C library's bits differ from numpy's (and from ``np.float_power``'s)."""
-    power, pow_ = np.power, math.pow
-    w = 0.0317
-    per = 200_000
-    scalar_simd = min(timeit.repeat(lambda: float(power(w, exponent)), number=per, repeat=rounds)) / per
-    scalar_libm = min(timeit.repeat(lambda: pow_(w, exponent), number=per, repeat=rounds)) / per
-    rng = np.random.default_rng(0)
-    row, out = rng.uniform(0.0, 0.1, N), np.empty(N)
-    reps = 2000
-    vector_simd = min(timeit.repeat(lambda: power(row, exponent, out=out), number=reps, repeat=rounds))
-    vector_libm = min(
-        timeit.repeat(lambda: np.float_power(row, exponent, out=out), number=reps, repeat=rounds)
-    )
-    sample = rng.uniform(0.0, 0.1, 50_000)
-    libm = np.array([pow_(v, exponent) for v in sample.tolist()])
-    return {
-        "scalar_simd": scalar_simd,
-        "scalar_libm": scalar_libm,
-        "vector_simd": vector_simd / reps / N,
-        "vector_libm": vector_libm / reps / N,
-        "differ_simd": float(np.mean(libm != np.power(sample, exponent))),
-        "differ_float_power": float(np.mean(libm != np.float_power(sample, exponent))),
-    }
-
-
 def rk4_steps(env_id: str) -> tuple[int, float]:
     """RK4 steps of the joint per env step and their length (s)."""
     task = catalogue.spec(env_id).build_task()
@@ -85,10 +56,10 @@ def rk4_steps(env_id: str) -> tuple[int, float]:
     return task.substeps, task.dt / task.substeps
 
 
-def rk4_on_floats(env_id: str, rounds: int, linear: bool) -> float:
-    """Seconds of one env step's RK4 steps on Python floats (``rk4_floats``) for the env's joint,
-    or (``linear``) for its linear part alone (the linear joint of the same J, b and
-    small-signal stiffness: arithmetic the hysteretic step does too, besides its powers)."""
+def rk4_on_floats(env_id: str, rounds: int, linear: bool, integrator=rk4_floats) -> float:
+    """Seconds of one env step's RK4 steps on one nozzle (``integrator``: the package's
+    ``rk4_floats``, or its Python reference) for the env's joint, or (``linear``) for its linear
+    part alone (the linear joint of the same J, b and small-signal stiffness)."""
     joint = catalogue.spec(env_id).build_task().plant
     if linear:
         joint = NozzleParameters.linear(joint.J, joint.b, joint.small_signal_stiffness)
@@ -98,10 +69,25 @@ def rk4_on_floats(env_id: str, rounds: int, linear: bool) -> float:
     return (
         min(
             timeit.repeat(
-                lambda: rk4_floats(1e-3, 0.0, 1e-3, 100.0, h, steps, params), number=per, repeat=rounds
+                lambda: integrator(1e-3, 0.0, 1e-3, 100.0, h, steps, params), number=per, repeat=rounds
             )
         )
         / per
+    )
+
+
+def rk4_on_arrays(env_id: str, rounds: int, integrator=rk4_arrays) -> float:
+    """Seconds of one env step's RK4 steps on a batch of N nozzles (``integrator``: the
+    package's ``rk4_arrays``, or its numpy reference), from a spread of states."""
+    params = rk4_parameters(catalogue.spec(env_id).build_task().plant.normalized())
+    steps, h = rk4_steps(env_id)
+    rng = np.random.default_rng(0)
+    state = np.vstack([rng.normal(0.0, 0.02, N), rng.normal(0.0, 0.3, N), rng.normal(0.0, 0.01, N)])
+    tau = rng.normal(0.0, 300.0, N)
+    reps = 20
+    return (
+        min(timeit.repeat(lambda: integrator(state, tau, h, steps, params), number=reps, repeat=rounds))
+        / reps
     )
 
 
@@ -159,8 +145,7 @@ def main() -> None:
         run, close = bench._vector_stepper("CartPole-v1", N, kind)
         cartpole[kind] = _best(run, 500, rounds)
         close()
-    exponent = catalogue.spec(next(iter(FLOORS))).build_task().rk4_params.n
-    costs = power_costs(float(exponent), rounds)
+    compiled = nozzle_joint.KERNEL == "compiled"
     lines = [
         "# Speed floors and the env contract",
         "",
@@ -171,57 +156,58 @@ def main() -> None:
         "",
         f"Pendulum-v1 step (through `gymnasium.make`): {pendulum * 1e6:.2f} us. CartPole-v1's "
         f"native vector env, N = {N}: {cartpole['zero'] * 1e6:.0f} us per step (zero actions), "
-        f"{cartpole['random'] * 1e6:.0f} us (random actions).",
+        f"{cartpole['random'] * 1e6:.0f} us (random actions). The joint's RK4 runs "
+        f"{'the compiled kernel' if compiled else 'the Python reference (no kernel built)'}.",
         "",
-        f"Power |w|^n of the Bouc-Wen rate (n = {exponent:g}, Table 1's joint): on one Python "
-        f"float, numpy's SIMD power {costs['scalar_simd'] * 1e9:.0f} ns, the C library's "
-        f"`math.pow` {costs['scalar_libm'] * 1e9:.0f} ns; per element of an (N,) array, numpy's "
-        f"SIMD power {costs['vector_simd'] * 1e9:.2f} ns, the C library's (`np.float_power`) "
-        f"{costs['vector_libm'] * 1e9:.2f} ns. `math.pow` differs from numpy's SIMD power in the "
-        f"last bit on {costs['differ_simd']:.1%} of |w| in [0, 0.1) rad and from "
-        f"`np.float_power` on {costs['differ_float_power']:.1%}: a float step on `math.pow` "
-        "equals an array step on `np.float_power`, never one on `np.power`.",
+        "The joint's RK4 over one env step (its RK4 steps, a power |w|^n per stage), on one nozzle "
+        "and on N nozzles, as the package runs it and as its Python reference (numpy on "
+        "arrays) runs it; the same bits either way:",
         "",
-        "Bounds: the best ratio were everything but the named costs free, whatever the rest of "
-        "the step's implementation. Single: Pendulum's step over the power calls of one step "
-        "on floats plus its RK4's linear arithmetic on floats (the joint's linear part alone, "
-        "which the hysteretic step computes too). "
-        "Vector: CartPole's step over the power elements of one step of N envs plus, with random "
-        "actions, one generator call per restart (a call that draws two numbers: the least a "
-        "restart can cost; today's draws the whole episode). Beside them, today's ratios of the "
-        "plant arithmetic alone (single: the joint's RK4 steps on floats, as the env's step "
-        "calls them; vector: `ssme-envs bench`'s floor) and of the env (`ssme-envs bench`'s "
-        "measurement, zero actions for single), and the time per step the floor leaves for "
-        "everything but today's plant arithmetic (and, with random actions, a call per restart) "
-        "beside what that everything takes today: negative, the floor is out of reach without "
-        "faster plant arithmetic.",
+        "| env | RK4 steps per env step | one nozzle | one nozzle, Python | N nozzles | N nozzles, numpy |",
+        "|---|---|---|---|---|---|",
+    ]
+    for env_id in FLOORS:
+        steps, _ = rk4_steps(env_id)
+        times = (
+            rk4_on_floats(env_id, rounds, linear=False),
+            rk4_on_floats(env_id, rounds, linear=False, integrator=nozzle_joint._rk4_floats_py),
+            rk4_on_arrays(env_id, rounds),
+            rk4_on_arrays(env_id, min(rounds, 2), integrator=nozzle_joint._rk4_arrays_py),
+        )
+        lines.append(
+            f"| {env_id} | {steps} | {times[0] * 1e6:.2f} us | {times[1] * 1e6:.1f} us | "
+            f"{times[2] * 1e6:.0f} us | {times[3] * 1e6:.0f} us |"
+        )
+    lines += [
         "",
-        "| env | mode | actions | issue floor | powers per step | restarts per step | "
-        "bound, numpy's power (today's bits) | bound, the C library's power | today: plant "
-        "arithmetic alone | today: the env | room beside today's plant arithmetic at the floor "
-        "(the rest today) |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "Bounds: the best ratio were everything but the named costs free. Single: Pendulum's step "
+        "over the joint's RK4 of one env step on one nozzle. Vector, zero actions: CartPole's "
+        "step over `ssme-envs bench`'s plant floor (the env's plant arithmetic for N envs). "
+        "Vector, random actions: the same plus one generator call per restart (a call that draws "
+        "two numbers: the least a restart can cost; today's draws the whole episode's uniforms). "
+        "Beside them, today's ratio of the env (`ssme-envs bench`'s measurement) and the time per "
+        "step the floor leaves beside those costs, with what the rest takes today.",
+        "",
+        "| env | mode | actions | issue floor | restarts per step | bound | today: the env | "
+        "room beside the named costs at the floor (the rest today) |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     verdicts = []
     for env_id, floors in FLOORS.items():
-        calls = 4 * rk4_steps(env_id)[0]  # a power per RK4 stage of the hysteretic joint
-        arithmetic = rk4_on_floats(env_id, rounds, linear=True)
-        run, close = bench._single_stepper(env_id)
-        ours = _best(run, bench.SINGLE_ROUND_STEPS, rounds)
-        close()
         joint = rk4_on_floats(env_id, rounds, linear=False)
-        bound = {
-            power: pendulum / (calls * costs[f"scalar_{power}"] + arithmetic) for power in ("simd", "libm")
-        }
-        lines.append(
-            f"| {env_id} | single | any | {_x(floors['single'])} | {calls} | - | {_x(bound['simd'])} | "
-            f"{_x(bound['libm'])} | {_x(pendulum / joint)} | {_x(pendulum / ours)} | "
-            f"{_room(pendulum / floors['single'], joint, ours)} |"
-        )
-        met = {power: value >= floors["single"] for power, value in bound.items()}
+        verdict = {}
+        for kind in ("zero", "random"):
+            run, close = bench._single_stepper(env_id, kind)
+            ours = _best(run, bench.SINGLE_ROUND_STEPS, rounds)
+            close()
+            bound = pendulum / joint
+            verdict[f"single {kind}"] = (bound >= floors["single"], pendulum / ours >= floors["single"])
+            lines.append(
+                f"| {env_id} | single | {kind} | {_x(floors['single'])} | - | {_x(bound)} | "
+                f"{_x(pendulum / ours)} | {_room(pendulum / floors['single'], joint, ours)} |"
+            )
         plant = bench.plant_floor(env_id, N, rounds=rounds)
         restarts = restarts_per_step(env_id)
-        # a restart's least cost is one call; the env draws its whole episode in it
         call = generator_call(2, rounds)
         draw = generator_call(catalogue.spec(env_id).build_task().draw_size, rounds)
         for kind in ("zero", "random"):
@@ -229,9 +215,8 @@ def main() -> None:
             run, close = bench._vector_stepper(env_id, N, kind)
             ours = _best(run, gym.spec(env_id).max_episode_steps, rounds)
             close()
-            for power in bound:
-                bound[power] = cartpole[kind] / (calls * N * costs[f"vector_{power}"] + restart_cost)
-                met[power] &= bound[power] >= floors["vector"]
+            bound = cartpole[kind] / (plant + restart_cost)
+            verdict[f"vector {kind}"] = (bound >= floors["vector"], cartpole[kind] / ours >= floors["vector"])
             shown = (
                 "-"
                 if kind == "zero"
@@ -239,24 +224,24 @@ def main() -> None:
             )
             room = _room(cartpole[kind] / floors["vector"], plant + restart_cost, ours)
             lines.append(
-                f"| {env_id} | vector N = {N} | {kind} | {_x(floors['vector'])} | {calls} | {shown} | "
-                f"{_x(bound['simd'])} | {_x(bound['libm'])} | {_x(cartpole[kind] / plant)} | "
-                f"{_x(cartpole[kind] / ours)} | {room} |"
+                f"| {env_id} | vector N = {N} | {kind} | {_x(floors['vector'])} | {shown} | "
+                f"{_x(bound)} | {_x(cartpole[kind] / ours)} | {room} |"
             )
+        met = [case for case, (_, today) in verdict.items() if today]
+        reachable = [case for case, (within, today) in verdict.items() if within and not today]
+        beyond = [case for case, (within, _) in verdict.items() if not within]
         verdicts.append(
-            f"- {env_id}: every floor within these bounds with numpy's power: "
-            f"{'yes' if met['simd'] else 'no'}; with the C library's: {'yes' if met['libm'] else 'no'}."
+            f"- {env_id}: met: {', '.join(met) or 'none'}; within the bound, not met: "
+            f"{', '.join(reachable) or 'none'}; beyond the bound: {', '.join(beyond) or 'none'}."
         )
     lines += [
         "",
         *verdicts,
         "",
-        "Where neither power keeps every floor within its bound, no step written in numpy and "
-        "Python meets them all while both promises hold: that would take one power function "
-        "with a fast call on a float and a SIMD loop on arrays that give the same bits (a "
-        "compiled extension of our own); a random-action floor beyond its bound with either "
-        "power needs a cheaper way than one call per restart to draw sub-envs' episodes from "
-        "their own generators.",
+        "A floor beyond its bound is out of reach while both promises hold, whatever the rest of "
+        "the step: with zero actions it would need faster plant arithmetic than the compiled "
+        "kernel's; with random actions, a cheaper way than one generator call per restart to "
+        "draw sub-envs' episodes from their own generators.",
         "",
     ]
     write_text(RESULTS, "\n".join(lines))
