@@ -12,15 +12,19 @@ import sys
 import types
 import warnings
 
+import gymnasium as gym
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+import ssme_envs  # noqa: F401  (registers the environments)
+from ssme_envs.envs import launcher_pitch, launcher_servo, nozzle_task
 from ssme_envs.models import nozzle_joint
 from ssme_envs.models.joint_power import power_array, power_float
 from ssme_envs.models.nozzle_joint import NozzleParameters, rk4_parameters
 
+LAUNCHER = "ssme_envs/LauncherPitch-v0"
 compiled = pytest.mark.skipif(nozzle_joint._KERNEL is None, reason="the compiled kernel is not built here")
 
 bases = st.floats(min_value=1e-300, max_value=1e300, allow_nan=False, allow_infinity=False)
@@ -142,3 +146,55 @@ def test_a_kernel_that_differs_from_the_reference_is_refused(monkeypatch) -> Non
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         assert nozzle_joint._load_kernel() is fake
+
+
+def _launcher_rollout(batched: bool, seed: int, **options) -> list[np.ndarray]:
+    """Observations and rewards of 120 random-action steps of LauncherPitch, one env or a vector
+    env of 6 (episodes ending and restarting)."""
+    if batched:
+        env = gym.make_vec(LAUNCHER, num_envs=6, vectorization_mode="vector_entry_point", **options)
+    else:
+        env = gym.make(LAUNCHER, disable_env_checker=True, **options)
+    obs, _ = env.reset(seed=seed)
+    rng = np.random.default_rng(seed)
+    out = [obs]
+    for _ in range(120):
+        shape = (6, 1) if batched else (1,)
+        obs, reward, terminated, truncated, _ = env.step(rng.uniform(-1, 1, shape).astype(np.float32))
+        out += [obs, np.asarray(reward)]
+        if not batched and (terminated or truncated):
+            out.append(env.reset()[0])
+    env.close()
+    return out
+
+
+@compiled
+@settings(max_examples=6, deadline=None)
+@given(
+    seed=st.integers(0, 2**31 - 1),
+    options=st.sampled_from(
+        [
+            {},
+            {"plant": "strong", "fault": {"kind": "gain_loss", "time": 0.3, "magnitude": 0.5}},
+            {"plant_spread": 0.3},
+            {"plant": "linear"},
+        ]
+    ),
+    batched=st.booleans(),
+)
+def test_launcher_gives_the_same_bits_with_and_without_the_kernels_servo(seed, options, batched):
+    """The kernel's servo loop against the Python loop over the Python integrators."""
+    with_kernel = _launcher_rollout(batched, seed, **options)
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(launcher_pitch, "compiled_servo", lambda batched: None)
+        patch.setattr(nozzle_task, "rk4_floats", nozzle_joint._rk4_floats_py)
+        patch.setattr(nozzle_task, "rk4_arrays", nozzle_joint._rk4_arrays_py)
+        reference = _launcher_rollout(batched, seed, **options)
+    assert len(with_kernel) == len(reference)
+    assert all(np.array_equal(a, b) for a, b in zip(with_kernel, reference, strict=True))
+
+
+def test_a_substituted_integrator_gets_the_python_servo_loop(monkeypatch) -> None:
+    monkeypatch.setattr(nozzle_task, "rk4_floats", lambda *args: nozzle_joint._rk4_floats_py(*args))
+    assert launcher_servo.compiled_servo(batched=False) is None
+    assert launcher_servo.compiled_servo(batched=True) is nozzle_joint._KERNEL

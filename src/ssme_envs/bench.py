@@ -111,16 +111,10 @@ def _floor_stepper(env_id: str, num_envs: int) -> tuple[Callable[[int], float], 
             task.plant_step(plant, zero, zero, t, nominal, SYNCED)
 
     elif isinstance(task, LauncherTask):
-        joint, h = np.zeros((3, n)), task.dt / task.substeps / task.rk4_substeps
-        p00, p01, p10, p11, g0t, g0q, g1t, g1q = task.body
+        joint = np.zeros((3, n))
 
         def step() -> None:
-            theta = q = zero
-            for _ in range(task.substeps):
-                d = joint[0]
-                theta_next, q_next = p00 * theta + p01 * q + g0t * d, p10 * theta + p11 * q + g0q * d
-                integrate(joint, zero, h, task.rk4_substeps, task.rk4_params, SYNCED)
-                theta, q = theta_next + g1t * joint[0], q_next + g1q * joint[0]
+            task.plant_step(joint, zero, zero, zero, None, task.rk4_params, SYNCED)
 
     else:
         joint, h = np.zeros((3, n)), task.dt / task.substeps

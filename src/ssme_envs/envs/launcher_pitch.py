@@ -12,6 +12,13 @@ import gymnasium as gym
 import numpy as np
 
 from ssme_envs.envs import nozzle_task
+from ssme_envs.envs.launcher_servo import (
+    body_transition,
+    compiled_servo,
+    nozzle_servo_gains,
+    servo_batch,
+    servo_floats,
+)
 from ssme_envs.envs.nozzle_task import (
     DEG,
     ENV_STEP_RATE,
@@ -34,8 +41,6 @@ from ssme_envs.models.nozzle import (
 
 LAUNCHER_DT = 0.02  # s, a 50 Hz attitude loop
 SERVO_SUBSTEPS = 10  # nozzle servo and integration steps per attitude step: a 500 Hz servo
-SERVO_BANDWIDTH_HZ = 15.0
-SERVO_DAMPING = 0.7
 LAUNCHER_OBSERVATION = Observation(
     names=("attitude_deg", "rate_deg_s", "ref_deg", "err_deg", "err_int_deg_s", "nozzle_deg", "prev_action"),
     units=("deg", "deg/s", "deg", "deg", "deg s", "deg", "-"),
@@ -60,40 +65,6 @@ class LauncherState(NamedTuple):
 def _from_nozzle(name: str, doc: str) -> property:
     """A read-only attribute of the launcher that is its nozzle task's."""
     return property(lambda self: getattr(self.nozzle, name), doc=doc)
-
-
-def nozzle_servo_gains(plant: NozzleParameters) -> tuple[float, float, float]:
-    """Gains (feedforward, proportional, derivative) of the nozzle's position servo
-    ``tau = k_ff d_cmd - k_p d - k_d d'`` (N m/rad, N m/rad, N m s/rad).
-
-    Designed on the joint's small-signal (linear) stiffness k: with ``k_ff = k + k_p`` the linear
-    joint follows a constant command exactly, and ``J d'' + (b + k_d) d' + (k + k_p) d = k_ff d_cmd``
-    has 15 Hz natural frequency and 0.7 damping (gains floored at zero for a joint that is
-    already stiffer or better damped). The hysteretic part of a Bouc-Wen joint is what this
-    design does not see.
-    """
-    omega = 2.0 * math.pi * SERVO_BANDWIDTH_HZ
-    k = plant.small_signal_stiffness
-    k_p = max(plant.J * omega**2 - k, 0.0)
-    k_d = max(2.0 * SERVO_DAMPING * plant.J * omega - plant.b, 0.0)
-    return k + k_p, k_p, k_d
-
-
-def body_transition(instability: float, effectiveness: float, h: float) -> tuple[float, ...]:
-    """Exact discretization over h (s) of ``theta'' = mu_a theta + mu_c d`` with d linear
-    between samples (first-order hold): ``(theta, q)+ = Phi (theta, q) + G0 d_k + G1 d_k+1``.
-    Returns Phi00, Phi01, Phi10, Phi11, G0_theta, G0_q, G1_theta, G1_q."""
-    m = np.zeros((4, 4))
-    m[0, 1] = 1.0
-    m[1, 0] = instability
-    m[1, 2] = effectiveness
-    m[2, 3] = 1.0 / h
-    import scipy.linalg  # here: its import costs more than the whole env's
-
-    e = scipy.linalg.expm(m * h)
-    phi, ramp_start, ramp = e[:2, :2], e[:2, 2], e[:2, 3]
-    g0, g1 = ramp_start - ramp, ramp
-    return (*phi.ravel().tolist(), *g0.tolist(), *g1.tolist())
 
 
 @dataclass(frozen=True)
@@ -222,69 +193,59 @@ class LauncherTask:
         command in [-1, 1] of 3 deg; returns (state, the 7 observation values, reward, terminated)."""
         nozzle, theta, q, integral, prev, joint = state
         a, ref = action[0], ref[0]
-        feedforward, k_p, k_d = self.servo
-        drive = feedforward * (a * self.max_deflection)
-        lim = self.torque_limit
-        fault = self.fault
-        gain_loss = fault is not None and fault.kind == "gain_loss"
-        if gain_loss:  # times 1.0 before the fault: exact
-            servo_gain = ops.where(t > self.fault_step, fault.magnitude, 1.0)
-        h = self.dt / self.substeps
-        params, rk4_steps = self.rk4_params if joint is None else joint, self.rk4_substeps
-        rk4_h = h / rk4_steps  # h itself for one step
-        if not ops.batched:  # one env: the loop below on floats, without the carrier's calls
-            # the float integrator looked up where integrate looks it up (nozzle_task's)
-            x, v, w, theta, q = _servo_floats(
-                *nozzle, theta, q, drive, servo_gain if gain_loss else None, self.servo, lim, self.body,
-                rk4_h, rk4_steps, self.substeps, params, nozzle_task.rk4_floats,
-            )  # fmt: skip
-            nozzle = (x, v, w)
-        else:
-            p00, p01, p10, p11, g0_theta, g0_q, g1_theta, g1_q = self.body
-            for _ in range(self.substeps):
-                d = nozzle[0]
-                torque = ops.clip(drive - k_p * d - k_d * nozzle[1], -lim, lim)
-                if gain_loss:
-                    torque = torque * servo_gain
-                # the body's share of the old deflection is taken before the nozzle moves (in place)
-                theta_next = p00 * theta + p01 * q + g0_theta * d
-                q_next = p10 * theta + p11 * q + g0_q * d
-                nozzle = integrate(nozzle, torque, rk4_h, rk4_steps, params, ops)
-                d = nozzle[0]
-                theta, q = theta_next + g1_theta * d, q_next + g1_q * d
+        drive = self.servo[0] * (a * self.max_deflection)
+        fault, gain = self.fault, None
+        if fault is not None and fault.kind == "gain_loss":  # times 1.0 before the fault: exact
+            gain = ops.where(t > self.fault_step, fault.magnitude, 1.0)
+        params = self.rk4_params if joint is None else joint
+        nozzle, theta, q = self.plant_step(nozzle, theta, q, drive, gain, params, ops)
         m, e, integral, reward, terminated = self.nozzle.score(
             theta, a, prev, t, ref, noise[0], integral, ops
         )
         obs = (m * DEG, q * DEG, ref * DEG, e, integral, nozzle[0] * DEG, a)
         return LauncherState(nozzle, theta, q, integral, a, joint), obs, reward, terminated
 
+    def plant_step(
+        self, nozzle: Any, theta: Value, q: Value, drive: Value, gain: Value | None, params: RK4Parameters,
+        ops: Carrier,
+    ) -> tuple[Any, Value, Value]:  # fmt: skip
+        """The plant over one attitude step: the servo's samples of torque ``clip(drive - k_p d -
+        k_d d', -lim, lim)`` (times the fault's ``gain``; None: no fault), the joint's RK4 and the
+        rigid body, from the nozzle (a float tuple, or (3, N) stepped in place), attitude theta
+        (rad) and pitch rate q (rad/s). Returns (nozzle, theta, q). (The bench times it as the
+        plant's floor.)"""
+        lim = self.torque_limit
+        h = self.dt / self.substeps
+        rk4_steps = self.rk4_substeps
+        rk4_h = h / rk4_steps  # h itself for one step
+        kernel = compiled_servo(ops.batched)
+        args = (drive, gain, self.servo, lim, self.body, rk4_h, rk4_steps, self.substeps, params)
+        if not ops.batched:  # one env: the loop below on floats, without the carrier's calls
+            if kernel is not None:
+                x, v, w, theta, q = kernel.servo_float(*nozzle, theta, q, *args)
+            else:  # the float integrator looked up where integrate looks it up (nozzle_task's)
+                x, v, w, theta, q = servo_floats(*nozzle, theta, q, *args, nozzle_task.rk4_floats)
+            return (x, v, w), theta, q
+        if kernel is not None and (attitude := servo_batch(kernel, nozzle, theta, q, *args)):
+            return nozzle, *attitude
+        _, k_p, k_d = self.servo
+        p00, p01, p10, p11, g0_theta, g0_q, g1_theta, g1_q = self.body
+        for _ in range(self.substeps):
+            d = nozzle[0]
+            torque = ops.clip(drive - k_p * d - k_d * nozzle[1], -lim, lim)
+            if gain is not None:
+                torque = torque * gain
+            # the body's share of the old deflection is taken before the nozzle moves (in place)
+            theta_next = p00 * theta + p01 * q + g0_theta * d
+            q_next = p10 * theta + p11 * q + g0_q * d
+            nozzle = integrate(nozzle, torque, rk4_h, rk4_steps, params, ops)
+            d = nozzle[0]
+            theta, q = theta_next + g1_theta * d, q_next + g1_q * d
+        return nozzle, theta, q
+
     def render_row(self, state: LauncherState, obs: Sequence[float], ref: Sequence[float]) -> list[float]:
         """The measured attitude (rad), its reference, the nozzle deflection as a fraction of 3 deg."""
         return [obs[0] / DEG, ref[0], state.nozzle[0] / self.max_deflection]
-
-
-def _servo_floats(
-    x: float, v: float, w: float, theta: float, q: float, drive: float, gain: float | None,
-    servo: tuple, lim: float, body: tuple, rk4_h: float, rk4_steps: int, samples: int, params: RK4Parameters,
-    rk4_floats: Callable[..., tuple[float, float, float]],
-) -> tuple[float, float, float, float, float]:  # fmt: skip
-    """``samples`` servo samples of one launcher on floats, the operations of
-    :meth:`LauncherTask.step`'s loop in its order: the nozzle (x, v, w), attitude and pitch rate
-    after them."""
-    _, k_p, k_d = servo
-    p00, p01, p10, p11, g0_theta, g0_q, g1_theta, g1_q = body
-    low = -lim
-    for _ in range(samples):
-        torque = drive - k_p * x - k_d * v
-        torque = low if low > torque else torque  # min(max(torque, -lim), lim), as FLOATS.clip
-        torque = lim if lim < torque else torque
-        if gain is not None:
-            torque = torque * gain
-        theta_next = p00 * theta + p01 * q + g0_theta * x
-        q_next = p10 * theta + p11 * q + g0_q * x
-        x, v, w = rk4_floats(x, v, w, torque, rk4_h, rk4_steps, params)
-        theta, q = theta_next + g1_theta * x, q_next + g1_q * x
-    return x, v, w, theta, q
 
 
 class LauncherPitchEnv(TrackingEnv):

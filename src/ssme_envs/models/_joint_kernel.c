@@ -171,6 +171,39 @@ static void CLONES rk4_block(double *restrict x, double *restrict v, double *res
 #undef JOINT_AT
 }
 
+/* The launcher's nozzle servo (launcher_pitch._servo_floats and LauncherTask.step's batch loop),
+ * `samples` samples of `len` (<= BLOCK) launchers: the torque clip(drive - k_p x - k_d v, -lim,
+ * lim), times the fault's gain (gain NULL: none), into cols[0]; the rigid body's transition
+ * with the deflection before the sample; the joint's RK4 over it; the deflection after.
+ * servo = (k_p, k_d, lim), body = (p00, p01, p10, p11, g0_theta, g0_q, g1_theta, g1_q). */
+static void CLONES servo_block(double *restrict x, double *restrict v, double *restrict w, double *restrict theta,
+                               double *restrict q, const double *restrict drive, const double *restrict gain,
+                               const double *restrict servo, const double *restrict body,
+                               double (*restrict cols)[BLOCK], Py_ssize_t len, double h, long steps,
+                               long samples, int hys)
+{
+    double theta_next[BLOCK], q_next[BLOCK];
+    const double k_p = servo[0], k_d = servo[1], lim = servo[2], low = -lim;
+    for (long s = 0; s < samples; s++) {
+        for (Py_ssize_t i = 0; i < len; i++) {
+            double torque = drive[i] - k_p * x[i] - k_d * v[i];
+            torque = low > torque ? low : torque;
+            torque = lim < torque ? lim : torque;
+            cols[0][i] = torque;
+            theta_next[i] = body[0] * theta[i] + body[1] * q[i] + body[4] * x[i];
+            q_next[i] = body[2] * theta[i] + body[3] * q[i] + body[5] * x[i];
+        }
+        if (gain != NULL)
+            for (Py_ssize_t i = 0; i < len; i++)
+                cols[0][i] = cols[0][i] * gain[i];
+        rk4_block(x, v, w, cols, len, h, steps, hys);
+        for (Py_ssize_t i = 0; i < len; i++) {
+            theta[i] = theta_next[i] + body[6] * x[i];
+            q[i] = q_next[i] + body[7] * x[i];
+        }
+    }
+}
+
 /* A number, or a contiguous float64 vector of length n: its values into col (length len from
  * offset start) */
 typedef struct {
@@ -335,6 +368,167 @@ static PyObject *rk4_batch(PyObject *self, PyObject *const *args, Py_ssize_t nar
     Py_RETURN_NONE;
 }
 
+/* the servo's (feedforward, k_p, k_d) and the body's eight numbers into servo_body[0..2], [3..10]:
+ * (k_p, k_d, lim) then the body */
+static int read_servo(PyObject *servo, PyObject *lim, PyObject *body, double *out)
+{
+    int err = 0;
+    if (!PyTuple_Check(servo) || PyTuple_GET_SIZE(servo) != 3 || !PyTuple_Check(body) || PyTuple_GET_SIZE(body) != 8) {
+        PyErr_SetString(PyExc_TypeError, "servo: (feedforward, k_p, k_d); body: eight numbers");
+        return -1;
+    }
+    out[0] = number(PyTuple_GET_ITEM(servo, 1), &err);
+    out[1] = number(PyTuple_GET_ITEM(servo, 2), &err);
+    out[2] = number(lim, &err);
+    for (int i = 0; i < 8; i++)
+        out[3 + i] = number(PyTuple_GET_ITEM(body, i), &err);
+    return err ? -1 : 0;
+}
+
+/* servo_float(x, v, w, theta, q, drive, gain, servo, lim, body, h, steps, samples, p)
+ * -> (x, v, w, theta, q): launcher_pitch._servo_floats without its integrator argument */
+static PyObject *servo_float(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (nargs != 14) {
+        PyErr_SetString(PyExc_TypeError, "servo_float(x, v, w, theta, q, drive, gain, servo, lim, body, h, steps, samples, p)");
+        return NULL;
+    }
+    if (check_tables() < 0)
+        return NULL;
+    PyObject *items[8];
+    int hys, err = 0;
+    double sb[11];
+    if (read_joint(args[13], items, &hys) < 0 || read_servo(args[7], args[8], args[9], sb) < 0)
+        return NULL;
+    double x = number(args[0], &err), v = number(args[1], &err), w = number(args[2], &err);
+    double theta = number(args[3], &err), q = number(args[4], &err), drive = number(args[5], &err);
+    int has_gain = args[6] != Py_None;
+    double gain = has_gain ? number(args[6], &err) : 1.0;
+    double h = number(args[10], &err);
+    long steps = PyLong_AsLong(args[11]), samples = PyLong_AsLong(args[12]);
+    if ((steps == -1 || samples == -1) && PyErr_Occurred())
+        return NULL;
+    Joint p;
+    double *fields[8] = {&p.inv_j, &p.b_j, &p.k_el_j, &p.k_hys_j, &p.beta, &p.gamma, &p.n, &p.floor};
+    for (int i = 0; i < 8; i++)
+        *fields[i] = number(items[i], &err);
+    if (err)
+        return NULL;
+    const double k_p = sb[0], k_d = sb[1], lim = sb[2], low = -lim;
+    const double *body = sb + 3;
+    for (long s = 0; s < samples; s++) {
+        double torque = drive - k_p * x - k_d * v;
+        torque = low > torque ? low : torque;
+        torque = lim < torque ? lim : torque;
+        if (has_gain)
+            torque = torque * gain;
+        double theta_next = body[0] * theta + body[1] * q + body[4] * x;
+        double q_next = body[2] * theta + body[3] * q + body[5] * x;
+        double accel0 = torque * p.inv_j;
+        if (hys)
+            for (long k = 0; k < steps; k++)
+                rk4_step_hysteretic(&x, &v, &w, accel0, h, &p);
+        else
+            for (long k = 0; k < steps; k++)
+                rk4_step_linear(&x, &v, &w, accel0, h, &p);
+        theta = theta_next + body[6] * x;
+        q = q_next + body[7] * x;
+    }
+    return Py_BuildValue("(ddddd)", x, v, w, theta, q);
+}
+
+/* A writable C-contiguous float64 vector of length n (theta, q), in place */
+static int open_row(PyObject *obj, Py_ssize_t n, Py_buffer *view, const char *name)
+{
+    if (PyObject_GetBuffer(obj, view, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | PyBUF_WRITABLE) < 0) {
+        PyErr_Clear();
+        PyErr_Format(PyExc_TypeError, "%s: a writable contiguous float64 vector", name);
+        return -1;
+    }
+    if (view->ndim != 1 || view->shape[0] != n || strcmp(view->format, "d") != 0) {
+        PyBuffer_Release(view);
+        PyErr_Format(PyExc_TypeError, "%s: a writable float64 vector of length %zd", name, n);
+        return -1;
+    }
+    return 0;
+}
+
+/* servo_batch(state, theta, q, drive, gain, servo, lim, body, h, steps, samples, p): N launchers in
+ * place, state (3, N), theta and q (N,); drive and gain (None: no fault) numbers or (N,) */
+static PyObject *servo_batch(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (nargs != 12) {
+        PyErr_SetString(PyExc_TypeError, "servo_batch(state, theta, q, drive, gain, servo, lim, body, h, steps, samples, p)");
+        return NULL;
+    }
+    if (check_tables() < 0)
+        return NULL;
+    PyObject *items[8];
+    int hys, err = 0;
+    double sb[11];
+    if (read_joint(args[11], items, &hys) < 0 || read_servo(args[5], args[6], args[7], sb) < 0)
+        return NULL;
+    double h = number(args[8], &err);
+    long steps = PyLong_AsLong(args[9]), samples = PyLong_AsLong(args[10]);
+    if (err || ((steps == -1 || samples == -1) && PyErr_Occurred()))
+        return NULL;
+    Py_buffer state, rows[2];
+    if (PyObject_GetBuffer(args[0], &state, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | PyBUF_WRITABLE) < 0) {
+        PyErr_Clear();
+        PyErr_SetString(PyExc_TypeError, "state: a writable C-contiguous float64 (3, N) array");
+        return NULL;
+    }
+    if (state.ndim != 2 || state.shape[0] != 3 || strcmp(state.format, "d") != 0) {
+        PyBuffer_Release(&state);
+        PyErr_SetString(PyExc_TypeError, "state: a writable C-contiguous float64 (3, N) array");
+        return NULL;
+    }
+    Py_ssize_t n = state.shape[1];
+    int ok = 0, rows_open = 0, opened = 0;
+    Column cols[11]; /* drive, gain, then tau's slot unused, the joint's eight */
+    static const char *names[8] = {"inv_j", "b_j", "k_el_j", "k_hys_j", "beta", "gamma", "n", "w_floor"};
+    int has_gain = args[4] != Py_None;
+    if (open_row(args[1], n, &rows[0], "theta") == 0) {
+        rows_open = 1;
+        if (open_row(args[2], n, &rows[1], "q") == 0) {
+            rows_open = 2;
+            if (column_open(args[3], n, &cols[0], "drive") == 0) {
+                opened = 1;
+                if (!has_gain || column_open(args[4], n, &cols[1], "gain") == 0) {
+                    opened = 2;
+                    for (; opened < 10; opened++)
+                        if (column_open(items[opened - 2], n, &cols[opened], names[opened - 2]) < 0)
+                            break;
+                    ok = opened == 10;
+                }
+            }
+        }
+    }
+    if (ok) {
+        double *x = (double *)state.buf, *theta = (double *)rows[0].buf, *q = (double *)rows[1].buf;
+        double block[9][BLOCK], drive[BLOCK], gain[BLOCK];
+        for (Py_ssize_t start = 0; start < n; start += BLOCK) {
+            Py_ssize_t len = n - start < BLOCK ? n - start : BLOCK;
+            column_fill(&cols[0], drive, start, len);
+            if (has_gain)
+                column_fill(&cols[1], gain, start, len);
+            for (int c = 0; c < 8; c++)
+                column_fill(&cols[2 + c], block[1 + c], start, len);
+            servo_block(x + start, x + n + start, x + 2 * n + start, theta + start, q + start, drive,
+                        has_gain ? gain : NULL, sb, sb + 3, block, len, h, steps, samples, hys);
+        }
+    }
+    for (int c = 0; c < opened; c++)
+        if ((c != 1 || has_gain) && cols[c].is_view)
+            PyBuffer_Release(&cols[c].view);
+    for (int r = 0; r < rows_open; r++)
+        PyBuffer_Release(&rows[r]);
+    PyBuffer_Release(&state);
+    if (!ok)
+        return NULL;
+    Py_RETURN_NONE;
+}
+
 static int fill(PyObject *seq, double *dst, Py_ssize_t n)
 {
     PyObject *fast = PySequence_Fast(seq, "a sequence of floats");
@@ -381,6 +575,8 @@ static PyObject *power(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 static PyMethodDef methods[] = {
     {"rk4_float", (PyCFunction)(void (*)(void))rk4_float, METH_FASTCALL, "RK4 steps of one nozzle."},
     {"rk4_batch", (PyCFunction)(void (*)(void))rk4_batch, METH_FASTCALL, "RK4 steps of N nozzles, in place."},
+    {"servo_float", (PyCFunction)(void (*)(void))servo_float, METH_FASTCALL, "Servo samples of one launcher."},
+    {"servo_batch", (PyCFunction)(void (*)(void))servo_batch, METH_FASTCALL, "Servo samples of N launchers, in place."},
     {"set_tables", (PyCFunction)(void (*)(void))set_tables, METH_FASTCALL, "The power's tables."},
     {"power", (PyCFunction)(void (*)(void))power, METH_FASTCALL, "The joint's power on one float."},
     {NULL, NULL, 0, NULL},
