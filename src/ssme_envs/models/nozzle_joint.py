@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import warnings
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, fields
@@ -288,8 +289,11 @@ def _rk4_arrays_py(
 
 def _load_kernel() -> Any:
     """The compiled kernel where it was built and gives the references' bits on a check set
-    (both joints, both carriers, NaN and inf included); None otherwise, with a warning where it
-    was built but differs (a compiler that fused or reordered operations)."""
+    (both joints, both carriers, NaN and inf included); None otherwise (or where the environment
+    variable ``SSME_ENVS_NO_KERNEL`` is set), with a warning where it was built but differs (a
+    compiler that fused or reordered operations)."""
+    if os.environ.get("SSME_ENVS_NO_KERNEL"):  # the reference, on request (same bits, slower)
+        return None
     try:
         from ssme_envs.models import _joint_kernel  # type: ignore[attr-defined]
     except ImportError:
