@@ -27,7 +27,7 @@ from ssme_envs.models.nozzle_joint import NozzleParameters, rk4_parameters
 LAUNCHER = "ssme_envs/LauncherPitch-v0"
 compiled = pytest.mark.skipif(nozzle_joint._KERNEL is None, reason="the compiled kernel is not built here")
 
-bases = st.floats(min_value=1e-300, max_value=1e300, allow_nan=False, allow_infinity=False)
+bases = st.floats(min_value=0.0, max_value=1e300, allow_nan=False, allow_infinity=False)
 exponents = st.floats(min_value=0.05, max_value=5.0)
 nozzles = st.builds(
     NozzleParameters,
@@ -46,6 +46,9 @@ joint_states = st.tuples(st.floats(-0.05, 0.05), st.floats(-2.0, 2.0), st.floats
 @settings(max_examples=300, deadline=None)
 @given(x=bases, n=exponents)
 def test_power_is_within_a_few_ulps_of_the_c_library(x: float, n: float) -> None:
+    if x == 0.0:
+        assert power_float(x, n) == 0.0
+        return
     y = n * math.log(x)
     if not -700.0 < y < 700.0:  # the result over- or underflows: its own test below
         return
@@ -132,6 +135,7 @@ def test_rk4_arrays_takes_a_strided_state_through_the_reference_with_the_same_bi
 
 def test_a_kernel_that_differs_from_the_reference_is_refused(monkeypatch) -> None:
     """A build that fused or reordered operations (one ulp off) is not used, with a warning."""
+    monkeypatch.delenv("SSME_ENVS_NO_KERNEL", raising=False)
     real = nozzle_joint._KERNEL or types.SimpleNamespace(set_tables=lambda *a: None)
     fake = types.ModuleType("ssme_envs.models._joint_kernel")
     fake.set_tables = real.set_tables

@@ -65,8 +65,12 @@ def bench_command(args: argparse.Namespace) -> int:
     rows = run_benchmark(env_ids, sizes, args.rounds, progress=_to_stderr, actions=actions)
     table = format_table(rows)
     print(table)
+    from ssme_envs.models.nozzle_joint import KERNEL
+
+    joint = f"The nozzle joint ran its {'compiled kernel' if KERNEL == 'compiled' else 'Python reference'}."
+    print(joint)
     if args.out is not None:
-        write_text(args.out, "Command: `ssme-envs bench`\n\n" + table + "\n")
+        write_text(args.out, "Command: `ssme-envs bench`\n\n" + table + "\n\n" + joint + "\n")
     return 0
 
 

@@ -35,7 +35,7 @@ static int check_tables(void)
     return tables_set ? 0 : -1;
 }
 
-/* joint_power.power_float: x^n for a positive normal x (inf and NaN returned as they are) */
+/* joint_power.power_float: x^n for x >= 0 (0 for 0; inf and NaN returned as they are) */
 static inline double joint_power(double x, double n)
 {
     const double round = 6755399441055744.0;        /* 1.5 2^52 */
@@ -44,12 +44,13 @@ static inline double joint_power(double x, double n)
     const double step_hi = 0x1.62e42feep-7, step_lo = 0x1.a39ef35793c76p-39; /* log(2)/64 */
     const double inv_step = 0x1.71547652b82fep6, y_limit = 800.0;           /* 64/log(2) */
     int finite = x <= 0x1.fffffffffffffp1023;
-    uint64_t bits = to_bits(finite ? x : 1.0);
+    int tiny = x < 0x1p-1022; /* subnormal (scaled up by 2^54, exactly) or zero */
+    uint64_t bits = to_bits(finite ? (tiny ? (x == 0.0 ? 1.0 : x * 0x1p54) : x) : 1.0);
     uint64_t mantissa = bits & 0x000fffffffffffffULL;
     uint64_t i = mantissa >> 45;
     double m = from_bits(mantissa | 0x3ff0000000000000ULL);
     double c = from_bits((mantissa & 0x000fe00000000000ULL) | 0x3ff0100000000000ULL); /* 1 + (i + 1/2)/128 */
-    double e = from_bits((bits >> 52) | 0x4330000000000000ULL) - (two52 + 1023.0);
+    double e = from_bits((bits >> 52) | 0x4330000000000000ULL) - (two52 + (tiny ? 1077.0 : 1023.0));
     double r = (m - c) * inv_c[i];
     double log1p = r + r * r * (-0.5 + r * (0x1.5555555555555p-2 + r * (-0.25 + r * (0.2 + r * -0x1.5555555555555p-3))));
     double y = n * ((e * ln2_hi + log_c[i]) + (e * ln2_lo + log1p));
@@ -66,7 +67,7 @@ static inline double joint_power(double x, double n)
     double s1 = from_bits(to_bits(q1 + (two52 + 1023.0)) << 52);
     double s2 = from_bits(to_bits((q - q1) + (two52 + 1023.0)) << 52);
     double out = ((s * expm1 + s) * s1) * s2;
-    return finite ? out : x;
+    return finite ? (x == 0.0 ? 0.0 : out) : x;
 }
 
 typedef struct {

@@ -24,9 +24,9 @@ from :func:`tables`), which the tests hold to them bit for bit.
 
 Relative error against the exact power: a few units in the last place plus ``|y|`` ulps from
 ``y``'s own rounding (``tests/test_joint_kernel.py`` bounds it against ``math.pow``). Domain:
-``x`` a positive normal float (the joint floors ``|w|``, see
-:func:`~ssme_envs.models.nozzle_joint.rk4_parameters`), or inf or NaN, which are returned as
-they are; ``n`` positive and finite.
+``x >= 0`` (0 gives 0; a subnormal ``x`` is taken as ``m 2^e`` all the same), or inf or NaN,
+which are returned as they are; ``n`` positive and finite. (The joint floors ``|w|`` well
+above the subnormals, see :func:`~ssme_envs.models.nozzle_joint.rk4_parameters`.)
 """
 
 from __future__ import annotations
@@ -69,6 +69,8 @@ def power_float(x: float, n: float) -> float:
     """``x^n`` on Python floats (see the module docstring for the domain)."""
     if not x <= _FINITE_MAX:  # inf or NaN, as they are
         return x
+    if x == 0.0:
+        return 0.0
     inv_c, log_c, exp2 = tables()
     m, e = math.frexp(x)
     m, e_f = m + m, float(e - 1)
@@ -96,8 +98,8 @@ def power_array(x: np.ndarray, n: np.ndarray | float) -> np.ndarray:
     """``x^n`` elementwise on float64 arrays, the operations of :func:`power_float`."""
     inv_c, log_c, exp2 = (np.array(t) for t in tables())
     x = np.asarray(x, dtype=np.float64)
-    finite = x <= _FINITE_MAX
-    m, e = np.frexp(np.where(finite, x, 1.0))
+    finite, zero = x <= _FINITE_MAX, x == 0.0
+    m, e = np.frexp(np.where(finite & ~zero, x, 1.0))
     m, e_f = m + m, (e - 1).astype(np.float64)
     i = ((m - 1.0) * 128.0).astype(np.int64)
     r = (m - (1.0 + (i + 0.5) * 0.0078125)) * inv_c[i]
@@ -112,7 +114,7 @@ def power_array(x: np.ndarray, n: np.ndarray | float) -> np.ndarray:
     q1 = (q * 0.5 - 0.25 + ROUND) - ROUND
     with np.errstate(over="ignore"):
         out = ((s * expm1 + s) * _two_to(q1)) * _two_to(q - q1)
-    return np.where(finite, out, x)
+    return np.where(finite, np.where(zero, 0.0, out), x)
 
 
 __all__ = ["power_array", "power_float", "tables"]
