@@ -270,79 +270,86 @@ static double number(PyObject *obj, int *err)
     return value;
 }
 
+/* the call's argument count, and the power's tables set */
+static int check_call(Py_ssize_t nargs, Py_ssize_t expected, const char *usage)
+{
+    if (nargs != expected) {
+        PyErr_SetString(PyExc_TypeError, usage);
+        return -1;
+    }
+    return check_tables();
+}
+
+/* the joint's eight numbers (read_joint's items) into p */
+static int joint_numbers(PyObject **items, Joint *p)
+{
+    int err = 0;
+    double *fields[8] = {&p->inv_j, &p->b_j, &p->k_el_j, &p->k_hys_j, &p->beta, &p->gamma, &p->n, &p->floor};
+    for (int i = 0; i < 8; i++)
+        *fields[i] = number(items[i], &err);
+    return err ? -1 : 0;
+}
+
+/* `steps` RK4 steps of one nozzle under the torque held (accel0 = tau / J) */
+static inline void rk4_steps(double *x, double *v, double *w, double accel0, double h, long steps, int hys,
+                             const Joint *p)
+{
+    if (hys)
+        for (long s = 0; s < steps; s++)
+            rk4_step_hysteretic(x, v, w, accel0, h, p);
+    else
+        for (long s = 0; s < steps; s++)
+            rk4_step_linear(x, v, w, accel0, h, p);
+}
+
+/* a writable C-contiguous float64 (3, N) array: the nozzles' state */
+static int open_state(PyObject *obj, Py_buffer *view)
+{
+    if (PyObject_GetBuffer(obj, view, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | PyBUF_WRITABLE) < 0) {
+        PyErr_Clear();
+        PyErr_SetString(PyExc_TypeError, "state: a writable C-contiguous float64 (3, N) array");
+        return -1;
+    }
+    if (view->ndim != 2 || view->shape[0] != 3 || strcmp(view->format, "d") != 0) {
+        PyBuffer_Release(view);
+        PyErr_SetString(PyExc_TypeError, "state: a writable C-contiguous float64 (3, N) array");
+        return -1;
+    }
+    return 0;
+}
+
 /* rk4_float(x, v, w, tau, h, steps, p) -> (x, v, w) */
 static PyObject *rk4_float(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
-    if (nargs != 7) {
-        PyErr_SetString(PyExc_TypeError, "rk4_float(x, v, w, tau, h, steps, p)");
-        return NULL;
-    }
-    if (check_tables() < 0)
-        return NULL;
     PyObject *items[8];
     int hys, err = 0;
-    if (read_joint(args[6], items, &hys) < 0)
+    Joint p;
+    if (check_call(nargs, 7, "rk4_float(x, v, w, tau, h, steps, p)") < 0 || read_joint(args[6], items, &hys) < 0 ||
+        joint_numbers(items, &p) < 0)
         return NULL;
     double x = number(args[0], &err), v = number(args[1], &err), w = number(args[2], &err);
     double tau = number(args[3], &err), h = number(args[4], &err);
     long steps = PyLong_AsLong(args[5]);
-    if (steps == -1 && PyErr_Occurred())
+    if (err || (steps == -1 && PyErr_Occurred()))
         return NULL;
-    Joint p;
-    double *fields[8] = {&p.inv_j, &p.b_j, &p.k_el_j, &p.k_hys_j, &p.beta, &p.gamma, &p.n, &p.floor};
-    for (int i = 0; i < 8; i++)
-        *fields[i] = number(items[i], &err);
-    if (err)
-        return NULL;
-    double accel0 = tau * p.inv_j;
-    if (hys)
-        for (long s = 0; s < steps; s++)
-            rk4_step_hysteretic(&x, &v, &w, accel0, h, &p);
-    else
-        for (long s = 0; s < steps; s++)
-            rk4_step_linear(&x, &v, &w, accel0, h, &p);
-    PyObject *out = PyTuple_New(3);
-    if (out == NULL)
-        return NULL;
-    PyObject *values[3] = {PyFloat_FromDouble(x), PyFloat_FromDouble(v), PyFloat_FromDouble(w)};
-    for (int i = 0; i < 3; i++) {
-        if (values[i] == NULL) {
-            Py_DECREF(out);
-            return NULL;
-        }
-        PyTuple_SET_ITEM(out, i, values[i]);
-    }
-    return out;
+    rk4_steps(&x, &v, &w, tau * p.inv_j, h, steps, hys, &p);
+    return Py_BuildValue("(ddd)", x, v, w);
 }
 
 /* rk4_batch(state, tau, h, steps, p): state a C-contiguous float64 (3, N) array, in place */
 static PyObject *rk4_batch(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
-    if (nargs != 5) {
-        PyErr_SetString(PyExc_TypeError, "rk4_batch(state, tau, h, steps, p)");
-        return NULL;
-    }
-    if (check_tables() < 0)
-        return NULL;
     PyObject *items[8];
     int hys, err = 0;
-    if (read_joint(args[4], items, &hys) < 0)
+    if (check_call(nargs, 5, "rk4_batch(state, tau, h, steps, p)") < 0 || read_joint(args[4], items, &hys) < 0)
         return NULL;
     double h = number(args[2], &err);
     long steps = PyLong_AsLong(args[3]);
     if (err || (steps == -1 && PyErr_Occurred()))
         return NULL;
     Py_buffer state;
-    if (PyObject_GetBuffer(args[0], &state, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | PyBUF_WRITABLE) < 0) {
-        PyErr_Clear();
-        PyErr_SetString(PyExc_TypeError, "state: a writable C-contiguous float64 (3, N) array");
+    if (open_state(args[0], &state) < 0)
         return NULL;
-    }
-    if (state.ndim != 2 || state.shape[0] != 3 || strcmp(state.format, "d") != 0) {
-        PyBuffer_Release(&state);
-        PyErr_SetString(PyExc_TypeError, "state: a writable C-contiguous float64 (3, N) array");
-        return NULL;
-    }
     Py_ssize_t n = state.shape[1];
     Column cols[9];
     int opened = 0;
@@ -390,16 +397,13 @@ static int read_servo(PyObject *servo, PyObject *lim, PyObject *body, double *ou
  * -> (x, v, w, theta, q): launcher_pitch._servo_floats without its integrator argument */
 static PyObject *servo_float(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
-    if (nargs != 14) {
-        PyErr_SetString(PyExc_TypeError, "servo_float(x, v, w, theta, q, drive, gain, servo, lim, body, h, steps, samples, p)");
-        return NULL;
-    }
-    if (check_tables() < 0)
-        return NULL;
     PyObject *items[8];
     int hys, err = 0;
     double sb[11];
-    if (read_joint(args[13], items, &hys) < 0 || read_servo(args[7], args[8], args[9], sb) < 0)
+    Joint p;
+    if (check_call(nargs, 14, "servo_float(x, v, w, theta, q, drive, gain, servo, lim, body, h, steps, samples, p)") < 0 ||
+        read_joint(args[13], items, &hys) < 0 || joint_numbers(items, &p) < 0 ||
+        read_servo(args[7], args[8], args[9], sb) < 0)
         return NULL;
     double x = number(args[0], &err), v = number(args[1], &err), w = number(args[2], &err);
     double theta = number(args[3], &err), q = number(args[4], &err), drive = number(args[5], &err);
@@ -407,13 +411,7 @@ static PyObject *servo_float(PyObject *self, PyObject *const *args, Py_ssize_t n
     double gain = has_gain ? number(args[6], &err) : 1.0;
     double h = number(args[10], &err);
     long steps = PyLong_AsLong(args[11]), samples = PyLong_AsLong(args[12]);
-    if ((steps == -1 || samples == -1) && PyErr_Occurred())
-        return NULL;
-    Joint p;
-    double *fields[8] = {&p.inv_j, &p.b_j, &p.k_el_j, &p.k_hys_j, &p.beta, &p.gamma, &p.n, &p.floor};
-    for (int i = 0; i < 8; i++)
-        *fields[i] = number(items[i], &err);
-    if (err)
+    if (err || ((steps == -1 || samples == -1) && PyErr_Occurred()))
         return NULL;
     const double k_p = sb[0], k_d = sb[1], lim = sb[2], low = -lim;
     const double *body = sb + 3;
@@ -425,13 +423,7 @@ static PyObject *servo_float(PyObject *self, PyObject *const *args, Py_ssize_t n
             torque = torque * gain;
         double theta_next = body[0] * theta + body[1] * q + body[4] * x;
         double q_next = body[2] * theta + body[3] * q + body[5] * x;
-        double accel0 = torque * p.inv_j;
-        if (hys)
-            for (long k = 0; k < steps; k++)
-                rk4_step_hysteretic(&x, &v, &w, accel0, h, &p);
-        else
-            for (long k = 0; k < steps; k++)
-                rk4_step_linear(&x, &v, &w, accel0, h, &p);
+        rk4_steps(&x, &v, &w, torque * p.inv_j, h, steps, hys, &p);
         theta = theta_next + body[6] * x;
         q = q_next + body[7] * x;
     }
@@ -458,32 +450,19 @@ static int open_row(PyObject *obj, Py_ssize_t n, Py_buffer *view, const char *na
  * place, state (3, N), theta and q (N,); drive and gain (None: no fault) numbers or (N,) */
 static PyObject *servo_batch(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
-    if (nargs != 12) {
-        PyErr_SetString(PyExc_TypeError, "servo_batch(state, theta, q, drive, gain, servo, lim, body, h, steps, samples, p)");
-        return NULL;
-    }
-    if (check_tables() < 0)
-        return NULL;
     PyObject *items[8];
     int hys, err = 0;
     double sb[11];
-    if (read_joint(args[11], items, &hys) < 0 || read_servo(args[5], args[6], args[7], sb) < 0)
+    if (check_call(nargs, 12, "servo_batch(state, theta, q, drive, gain, servo, lim, body, h, steps, samples, p)") < 0 ||
+        read_joint(args[11], items, &hys) < 0 || read_servo(args[5], args[6], args[7], sb) < 0)
         return NULL;
     double h = number(args[8], &err);
     long steps = PyLong_AsLong(args[9]), samples = PyLong_AsLong(args[10]);
     if (err || ((steps == -1 || samples == -1) && PyErr_Occurred()))
         return NULL;
     Py_buffer state, rows[2];
-    if (PyObject_GetBuffer(args[0], &state, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | PyBUF_WRITABLE) < 0) {
-        PyErr_Clear();
-        PyErr_SetString(PyExc_TypeError, "state: a writable C-contiguous float64 (3, N) array");
+    if (open_state(args[0], &state) < 0)
         return NULL;
-    }
-    if (state.ndim != 2 || state.shape[0] != 3 || strcmp(state.format, "d") != 0) {
-        PyBuffer_Release(&state);
-        PyErr_SetString(PyExc_TypeError, "state: a writable C-contiguous float64 (3, N) array");
-        return NULL;
-    }
     Py_ssize_t n = state.shape[1];
     int ok = 0, rows_open = 0, opened = 0;
     Column cols[11]; /* drive, gain, then tau's slot unused, the joint's eight */
@@ -563,11 +542,7 @@ static PyObject *set_tables(PyObject *self, PyObject *const *args, Py_ssize_t na
 static PyObject *power(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
     int err = 0;
-    if (nargs != 2) {
-        PyErr_SetString(PyExc_TypeError, "power(x, n)");
-        return NULL;
-    }
-    if (check_tables() < 0)
+    if (check_call(nargs, 2, "power(x, n)") < 0)
         return NULL;
     double x = number(args[0], &err), n = number(args[1], &err);
     return err ? NULL : PyFloat_FromDouble(joint_power(x, n));
