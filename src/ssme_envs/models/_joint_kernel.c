@@ -35,22 +35,20 @@ static int check_tables(void)
     return tables_set ? 0 : -1;
 }
 
-/* joint_power.power_float: x^n for x >= 0 (0 for 0; inf and NaN returned as they are) */
-static inline double joint_power(double x, double n)
+/* x^n for a positive normal x, whose exponent field less `bias` is e in x = m 2^e, m in [1, 2) */
+static inline double power_parts(double x, double n, double bias)
 {
     const double round = 6755399441055744.0;        /* 1.5 2^52 */
     const double two52 = 4503599627370496.0;         /* 2^52 */
     const double ln2_hi = 0x1.62e42feep-1, ln2_lo = 0x1.a39ef35793c76p-33;
     const double step_hi = 0x1.62e42feep-7, step_lo = 0x1.a39ef35793c76p-39; /* log(2)/64 */
     const double inv_step = 0x1.71547652b82fep6, y_limit = 800.0;           /* 64/log(2) */
-    int finite = x <= 0x1.fffffffffffffp1023;
-    int tiny = x < 0x1p-1022; /* subnormal (scaled up by 2^54, exactly) or zero */
-    uint64_t bits = to_bits(finite ? (tiny ? (x == 0.0 ? 1.0 : x * 0x1p54) : x) : 1.0);
+    uint64_t bits = to_bits(x);
     uint64_t mantissa = bits & 0x000fffffffffffffULL;
     uint64_t i = mantissa >> 45;
     double m = from_bits(mantissa | 0x3ff0000000000000ULL);
     double c = from_bits((mantissa & 0x000fe00000000000ULL) | 0x3ff0100000000000ULL); /* 1 + (i + 1/2)/128 */
-    double e = from_bits((bits >> 52) | 0x4330000000000000ULL) - (two52 + (tiny ? 1077.0 : 1023.0));
+    double e = from_bits((bits >> 52) | 0x4330000000000000ULL) - (two52 + bias);
     double r = (m - c) * inv_c[i];
     double log1p = r + r * r * (-0.5 + r * (0x1.5555555555555p-2 + r * (-0.25 + r * (0.2 + r * -0x1.5555555555555p-3))));
     double y = n * ((e * ln2_hi + log_c[i]) + (e * ln2_lo + log1p));
@@ -66,8 +64,27 @@ static inline double joint_power(double x, double n)
     /* 2^j as bits: j + 1023 sits in the low bits of (j + 1023) + 2^52, exactly */
     double s1 = from_bits(to_bits(q1 + (two52 + 1023.0)) << 52);
     double s2 = from_bits(to_bits((q - q1) + (two52 + 1023.0)) << 52);
-    double out = ((s * expm1 + s) * s1) * s2;
-    return finite ? (x == 0.0 ? 0.0 : out) : x;
+    return ((s * expm1 + s) * s1) * s2;
+}
+
+/* joint_power.power_float where x is a positive normal float, inf or NaN (the RK4's floored |w|):
+ * the same bits, without the passes for zero and subnormals */
+static inline double joint_power_normal(double x, double n)
+{
+    int finite = x <= 0x1.fffffffffffffp1023;
+    double out = power_parts(finite ? x : 1.0, n, 1023.0);
+    return finite ? out : x;
+}
+
+/* joint_power.power_float: x^n for x >= 0 (0 for 0; a subnormal scaled by 2^54, exactly; inf and
+ * NaN returned as they are) */
+static inline double joint_power(double x, double n)
+{
+    if (x == 0.0)
+        return 0.0;
+    if (x < 0x1p-1022)
+        return power_parts(x * 0x1p54, n, 1077.0);
+    return joint_power_normal(x, n);
 }
 
 typedef struct {
@@ -78,7 +95,7 @@ typedef struct {
 static inline double bouc_wen_rate(double v, double w, const Joint *p)
 {
     double aw = fabs(w);
-    return v * (1.0 - (copysign(p->gamma, v * w) + p->beta) * joint_power(p->floor > aw ? p->floor : aw, p->n));
+    return v * (1.0 - (copysign(p->gamma, v * w) + p->beta) * joint_power_normal(p->floor > aw ? p->floor : aw, p->n));
 }
 
 /* one RK4 step of length h of one linear nozzle (w moves as x does); accel0 = tau / J */
