@@ -1,5 +1,9 @@
 """The nozzle joint: its parameters (Table 1 of the nozzle paper) and the RK4 arithmetic that
-integrates it, on floats (one nozzle) and on arrays (a batch) alike (see :mod:`ssme_envs.models.nozzle`)."""
+integrates it, on floats (one nozzle) and on arrays (a batch) alike (see :mod:`ssme_envs.models.nozzle`).
+
+:func:`rk4_floats` and :func:`rk4_arrays` run the compiled kernel (``_joint_kernel.c``) where it
+was built and gives the Python reference's bits at import (:data:`KERNEL` says which), the
+reference (``_rk4_floats_py``, ``_rk4_arrays_py``) otherwise: the same bits either way."""
 
 from __future__ import annotations
 
