@@ -142,6 +142,7 @@ def test_a_kernel_that_differs_from_the_reference_is_refused(monkeypatch) -> Non
     fake.power = lambda x, n: math.nextafter(power_float(x, n), math.inf)
     fake.rk4_float = nozzle_joint._rk4_floats_py
     fake.rk4_batch = nozzle_joint._rk4_arrays_py
+    fake.servo_float = fake.servo_batch = lambda *args: None
     monkeypatch.setitem(sys.modules, "ssme_envs.models._joint_kernel", fake)
     monkeypatch.setattr(sys.modules["ssme_envs.models"], "_joint_kernel", fake, raising=False)
     with pytest.warns(RuntimeWarning, match="differs from its reference"):
@@ -202,3 +203,14 @@ def test_a_substituted_integrator_gets_the_python_servo_loop(monkeypatch) -> Non
     monkeypatch.setattr(nozzle_task, "rk4_floats", lambda *args: nozzle_joint._rk4_floats_py(*args))
     assert launcher_servo.compiled_servo(batched=False) is None
     assert launcher_servo.compiled_servo(batched=True) is nozzle_joint._KERNEL
+
+
+def test_a_build_of_an_older_source_is_refused(monkeypatch) -> None:
+    """A kernel without the calls this source makes (a stale build) warns and is not used."""
+    monkeypatch.delenv("SSME_ENVS_NO_KERNEL", raising=False)
+    stale = types.ModuleType("ssme_envs.models._joint_kernel")
+    stale.rk4_float, stale.rk4_batch = nozzle_joint._rk4_floats_py, nozzle_joint._rk4_arrays_py
+    monkeypatch.setitem(sys.modules, "ssme_envs.models._joint_kernel", stale)
+    monkeypatch.setattr(sys.modules["ssme_envs.models"], "_joint_kernel", stale, raising=False)
+    with pytest.warns(RuntimeWarning, match="differs from its reference"):
+        assert nozzle_joint._load_kernel() is None

@@ -291,45 +291,52 @@ def _rk4_arrays_py(
         state += stage
 
 
+def _kernel_agrees(kernel: Any) -> bool:
+    """Whether the kernel gives the references' bits on a check set (both joints, both carriers,
+    NaN and inf included), its tables set first."""
+    kernel.set_tables(*tables())
+    states = np.array(
+        [[0.01, -0.03, 0.0, 0.05, np.nan], [0.5, -2.0, 0.0, -3.0, 0.0], [0.02, 0.01, 0.0, -0.02, 0.0]]
+    )
+    tau = np.array([120.0, -900.0, 0.0, 3.0e4, 1.0])
+    strong = rk4_parameters(strong_nozzle().normalized())
+    powers = [(x, n) for x in (0.0, 5e-320, 1e-300, 0.03, 1.0, 7.5, math.inf) for n in (0.99, 1.5)]
+    agrees = all(kernel.power(x, n) == power_float(x, n) for x, n in powers)
+    agrees &= math.isnan(kernel.power(math.nan, 1.5))
+    for p in (strong, strong._replace(n=0.99), strong._replace(hysteretic=False)):
+        batch, expected = states.copy(), states.copy()
+        kernel.rk4_batch(batch, tau, 0.002, 3, p)
+        _rk4_arrays_py(expected, tau, 0.002, 3, p)
+        columns = zip(states.T.tolist(), tau.tolist(), strict=True)
+        floats = [kernel.rk4_float(*col, t, 0.002, 3, p) for col, t in columns]
+        agrees &= np.array_equal(batch, expected, equal_nan=True)
+        agrees &= np.array_equal(np.array(floats).T, expected, equal_nan=True)
+    return bool(agrees) and all(hasattr(kernel, name) for name in ("servo_float", "servo_batch"))
+
+
 def _load_kernel() -> Any:
-    """The compiled kernel where it was built and gives the references' bits on a check set
-    (both joints, both carriers, NaN and inf included); None otherwise (or where the environment
-    variable ``SSME_ENVS_NO_KERNEL`` is set), with a warning where it was built but differs (a
-    compiler that fused or reordered operations)."""
+    """The compiled kernel where it was built and :func:`_kernel_agrees`; None otherwise (or where
+    the environment variable ``SSME_ENVS_NO_KERNEL`` is set), with a warning where it was built
+    but differs (a compiler that fused or reordered operations, or a build of an older source)."""
     if os.environ.get("SSME_ENVS_NO_KERNEL"):  # the reference, on request (same bits, slower)
         return None
     try:
         from ssme_envs.models import _joint_kernel  # type: ignore[attr-defined]
     except ImportError:
         return None
-    _joint_kernel.set_tables(*tables())
-    states = np.array(
-        [[0.01, -0.03, 0.0, 0.05, np.nan], [0.5, -2.0, 0.0, -3.0, 0.0], [0.02, 0.01, 0.0, -0.02, 0.0]]
-    )
-    tau = np.array([120.0, -900.0, 0.0, 3.0e4, 1.0])
-    strong = rk4_parameters(strong_nozzle().normalized())
-    powers = [(x, n) for x in (1e-300, 0.03, 1.0, 7.5, math.inf, math.nan) for n in (0.99, 1.5)]
-    same = [_joint_kernel.power(x, n) == power_float(x, n) for x, n in powers[:-2]]
-    same.extend(math.isnan(_joint_kernel.power(x, n)) for x, n in powers[-2:])
-    for p in (strong, strong._replace(n=0.99), strong._replace(hysteretic=False)):
-        batch, expected = states.copy(), states.copy()
-        _joint_kernel.rk4_batch(batch, tau, 0.002, 3, p)
-        _rk4_arrays_py(expected, tau, 0.002, 3, p)
-        columns = zip(states.T.tolist(), tau.tolist(), strict=True)
-        floats = [_joint_kernel.rk4_float(*col, t, 0.002, 3, p) for col, t in columns]
-        ok = (
-            all(same)
-            and np.array_equal(batch, expected, equal_nan=True)
-            and np.array_equal(np.array(floats).T, expected, equal_nan=True)
+    try:
+        agrees = _kernel_agrees(_joint_kernel)
+    except (AttributeError, TypeError, ValueError):  # a build of an older source: its calls differ
+        agrees = False
+    if not agrees:
+        warnings.warn(
+            "ssme_envs: the compiled nozzle kernel differs from its reference and is not used "
+            "(rebuild it, `pip install .`, with a compiler that neither fuses multiply-adds nor "
+            "uses fast math)",
+            RuntimeWarning,
+            stacklevel=2,
         )
-        if not ok:
-            warnings.warn(
-                "ssme_envs: the compiled nozzle kernel differs from its reference and is not used "
-                "(rebuild without fast-math or fused multiply-add)",
-                RuntimeWarning,
-                stacklevel=2,
-            )
-            return None
+        return None
     return _joint_kernel
 
 
