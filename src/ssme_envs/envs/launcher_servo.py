@@ -115,7 +115,7 @@ def servo_floats(
     rk4_floats: Callable[..., tuple[float, float, float]],
 ) -> tuple[float, float, float, float, float]:  # fmt: skip
     """``samples`` servo samples of one launcher on floats, the operations of
-    :meth:`LauncherTask.step`'s loop in its order: the nozzle (x, v, w), attitude and pitch rate
+    :meth:`LauncherTask.plant_step`'s array loop in its order: the nozzle (x, v, w), attitude and pitch rate
     after them."""
     _, k_p, k_d = servo
     p00, p01, p10, p11, g0_theta, g0_q, g1_theta, g1_q = body

@@ -189,7 +189,7 @@ static void CLONES rk4_block(double *restrict x, double *restrict v, double *res
 #undef JOINT_AT
 }
 
-/* The launcher's nozzle servo (launcher_pitch._servo_floats and LauncherTask.step's batch loop),
+/* The launcher's nozzle servo (launcher_servo.servo_floats and LauncherTask.plant_step's array loop),
  * `samples` samples of `len` (<= BLOCK) launchers: the torque clip(drive - k_p x - k_d v, -lim,
  * lim), times the fault's gain (gain NULL: none), into cols[0]; the rigid body's transition
  * with the deflection before the sample; the joint's RK4 over it; the deflection after.
@@ -411,7 +411,7 @@ static int read_servo(PyObject *servo, PyObject *lim, PyObject *body, double *ou
 }
 
 /* servo_float(x, v, w, theta, q, drive, gain, servo, lim, body, h, steps, samples, p)
- * -> (x, v, w, theta, q): launcher_pitch._servo_floats without its integrator argument */
+ * -> (x, v, w, theta, q): launcher_servo.servo_floats without its integrator argument */
 static PyObject *servo_float(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
     PyObject *items[8];
