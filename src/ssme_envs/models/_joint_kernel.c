@@ -50,7 +50,8 @@ static inline double power_parts(double x, double n, double bias)
     double c = from_bits((mantissa & 0x000fe00000000000ULL) | 0x3ff0100000000000ULL); /* 1 + (i + 1/2)/128 */
     double e = from_bits((bits >> 52) | 0x4330000000000000ULL) - (two52 + bias);
     double r = (m - c) * inv_c[i];
-    double log1p = r + r * r * (-0.5 + r * (0x1.5555555555555p-2 + r * (-0.25 + r * (0.2 + r * -0x1.5555555555555p-3))));
+    double log1p =
+        r + r * r * (-0.5 + r * (0x1.5555555555555p-2 + r * (-0.25 + r * (0.2 + r * -0x1.5555555555555p-3))));
     double y = n * ((e * ln2_hi + log_c[i]) + (e * ln2_lo + log1p));
     y = y < -y_limit ? -y_limit : (y > y_limit ? y_limit : y);
     double t = y * inv_step + round;
@@ -58,7 +59,8 @@ static inline double power_parts(double x, double n, double bias)
     r = (y - k * step_hi) - k * step_lo;
     uint64_t j = to_bits(t) & 63;
     double q = (k - (from_bits(j | 0x4330000000000000ULL) - two52)) * 0.015625;
-    double expm1 = r + r * r * (0.5 + r * (0x1.5555555555555p-3 + r * (0x1.5555555555555p-5 + r * 0x1.1111111111111p-7)));
+    double expm1 =
+        r + r * r * (0.5 + r * (0x1.5555555555555p-3 + r * (0x1.5555555555555p-5 + r * 0x1.1111111111111p-7)));
     double s = exp2_table[j];
     double q1 = (q * 0.5 - 0.25 + round) - round;
     /* 2^j as bits: j + 1023 sits in the low bits of (j + 1023) + 2^52, exactly */
@@ -95,7 +97,8 @@ typedef struct {
 static inline double bouc_wen_rate(double v, double w, const Joint *p)
 {
     double aw = fabs(w);
-    return v * (1.0 - (copysign(p->gamma, v * w) + p->beta) * joint_power_normal(p->floor > aw ? p->floor : aw, p->n));
+    double power = joint_power_normal(p->floor > aw ? p->floor : aw, p->n);
+    return v * (1.0 - (copysign(p->gamma, v * w) + p->beta) * power);
 }
 
 /* one RK4 step of length h of one linear nozzle (w moves as x does); accel0 = tau / J */
