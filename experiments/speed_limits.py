@@ -29,7 +29,7 @@ from ssme_envs.envs import catalogue
 from ssme_envs.envs.launcher_pitch import LauncherTask
 from ssme_envs.envs.nozzle_task import NozzleTask
 from ssme_envs.models import nozzle_joint
-from ssme_envs.models.nozzle import NozzleParameters, rk4_arrays, rk4_floats, rk4_parameters
+from ssme_envs.models.nozzle import rk4_arrays, rk4_floats, rk4_parameters
 from ssme_envs.outputs import write_text
 
 RESULTS = Path(__file__).resolve().parent / "results" / "speed_limits.md"
@@ -56,13 +56,10 @@ def rk4_steps(env_id: str) -> tuple[int, float]:
     return task.substeps, task.dt / task.substeps
 
 
-def rk4_on_floats(env_id: str, rounds: int, linear: bool, integrator=rk4_floats) -> float:
+def rk4_on_floats(env_id: str, rounds: int, integrator=rk4_floats) -> float:
     """Seconds of one env step's RK4 steps on one nozzle (``integrator``: the package's
-    ``rk4_floats``, or its Python reference) for the env's joint, or (``linear``) for its linear
-    part alone (the linear joint of the same J, b and small-signal stiffness)."""
+    ``rk4_floats``, or its Python reference) for the env's joint."""
     joint = catalogue.spec(env_id).build_task().plant
-    if linear:
-        joint = NozzleParameters.linear(joint.J, joint.b, joint.small_signal_stiffness)
     params = rk4_parameters(joint.normalized())
     steps, h = rk4_steps(env_id)
     per = 20_000
@@ -169,8 +166,8 @@ def main() -> None:
     for env_id in FLOORS:
         steps, _ = rk4_steps(env_id)
         times = (
-            rk4_on_floats(env_id, rounds, linear=False),
-            rk4_on_floats(env_id, rounds, linear=False, integrator=nozzle_joint._rk4_floats_py),
+            rk4_on_floats(env_id, rounds),
+            rk4_on_floats(env_id, rounds, integrator=nozzle_joint._rk4_floats_py),
             rk4_on_arrays(env_id, rounds),
             rk4_on_arrays(env_id, min(rounds, 2), integrator=nozzle_joint._rk4_arrays_py),
         )
@@ -194,7 +191,7 @@ def main() -> None:
     ]
     verdicts = []
     for env_id, floors in FLOORS.items():
-        joint = rk4_on_floats(env_id, rounds, linear=False)
+        joint = rk4_on_floats(env_id, rounds)
         verdict = {}
         for kind in ("zero", "random"):
             run, close = bench._single_stepper(env_id, kind)

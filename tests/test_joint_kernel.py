@@ -214,3 +214,14 @@ def test_a_build_of_an_older_source_is_refused(monkeypatch) -> None:
     monkeypatch.setattr(sys.modules["ssme_envs.models"], "_joint_kernel", stale, raising=False)
     with pytest.warns(RuntimeWarning, match="differs from its reference"):
         assert nozzle_joint._load_kernel() is None
+
+
+@pytest.mark.parametrize("base", [-1e-3, -2.0, -math.inf])
+def test_a_negative_base_is_refused_by_name(base: float) -> None:
+    with pytest.raises(ValueError, match="takes x >= 0"):
+        power_float(base, 1.5)
+    with pytest.raises(ValueError, match="takes x >= 0"):
+        power_array(np.array([0.1, base]), 1.5)
+    if nozzle_joint._KERNEL is not None:
+        with pytest.raises(ValueError, match="takes x >= 0"):
+            nozzle_joint._KERNEL.power(base, 1.5)

@@ -485,7 +485,7 @@ static PyObject *servo_batch(PyObject *self, PyObject *const *args, Py_ssize_t n
         return NULL;
     Py_ssize_t n = state.shape[1];
     int ok = 0, rows_open = 0, opened = 0;
-    Column cols[11]; /* drive, gain, then tau's slot unused, the joint's eight */
+    Column cols[10]; /* drive, gain, the joint's eight */
     static const char *names[8] = {"inv_j", "b_j", "k_el_j", "k_hys_j", "beta", "gamma", "n", "w_floor"};
     int has_gain = args[4] != Py_None;
     if (open_row(args[1], n, &rows[0], "theta") == 0) {
@@ -565,6 +565,10 @@ static PyObject *power(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     if (check_call(nargs, 2, "power(x, n)") < 0)
         return NULL;
     double x = number(args[0], &err), n = number(args[1], &err);
+    if (!err && x < 0.0) {
+        PyErr_Format(PyExc_ValueError, "the joint's power takes x >= 0, got %R", args[0]);
+        return NULL;
+    }
     return err ? NULL : PyFloat_FromDouble(joint_power(x, n));
 }
 

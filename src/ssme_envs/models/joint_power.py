@@ -69,8 +69,10 @@ def power_float(x: float, n: float) -> float:
     """``x^n`` on Python floats (see the module docstring for the domain)."""
     if not x <= _FINITE_MAX:  # inf or NaN, as they are
         return x
-    if x == 0.0:
-        return 0.0
+    if x <= 0.0:
+        if x == 0.0:
+            return 0.0
+        raise ValueError(f"the joint's power takes x >= 0, got {x!r}")
     inv_c, log_c, exp2 = tables()
     m, e = math.frexp(x)
     m, e_f = m + m, float(e - 1)
@@ -89,6 +91,15 @@ def power_float(x: float, n: float) -> float:
     return ((s * expm1 + s) * math.ldexp(1.0, int(q1))) * math.ldexp(1.0, int(q - q1))
 
 
+@cache
+def _array_tables() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`tables` as read-only arrays, made once."""
+    arrays = tuple(np.array(t) for t in tables())
+    for a in arrays:
+        a.flags.writeable = False
+    return arrays
+
+
 def _two_to(k: np.ndarray) -> np.ndarray:
     """2^k for integral float k in the normal range, exactly."""
     return ((k.astype(np.int64) + 1023) << 52).view(np.float64)
@@ -96,8 +107,10 @@ def _two_to(k: np.ndarray) -> np.ndarray:
 
 def power_array(x: np.ndarray, n: np.ndarray | float) -> np.ndarray:
     """``x^n`` elementwise on float64 arrays, the operations of :func:`power_float`."""
-    inv_c, log_c, exp2 = (np.array(t) for t in tables())
+    inv_c, log_c, exp2 = _array_tables()
     x = np.asarray(x, dtype=np.float64)
+    if np.any(x < 0.0):
+        raise ValueError(f"the joint's power takes x >= 0, got {x[x < 0.0].flat[0]!r} among the bases")
     finite, zero = x <= _FINITE_MAX, x == 0.0
     m, e = np.frexp(np.where(finite & ~zero, x, 1.0))
     m, e_f = m + m, (e - 1).astype(np.float64)
