@@ -1,5 +1,6 @@
-"""The nozzle joint's compiled RK4 kernel, optional: without a C compiler the package installs
-and runs on its Python reference, which gives the same bits (ssme_envs.models.nozzle_joint)."""
+"""The compiled kernels, optional: the nozzle joint's RK4 and the engine's float step. Without a C
+compiler the package installs and runs on their Python references, which give the same bits
+(ssme_envs.models.nozzle_joint, ssme_envs.models.engine_step)."""
 
 from setuptools import Extension, setup
 from setuptools.command.build_ext import build_ext
@@ -21,7 +22,8 @@ class BuildExt(build_ext):
 
 setup(
     ext_modules=[
-        Extension("ssme_envs.models._joint_kernel", ["src/ssme_envs/models/_joint_kernel.c"], optional=True)
+        Extension(f"ssme_envs.models.{name}", [f"src/ssme_envs/models/{name}.c"], optional=True)
+        for name in ("_joint_kernel", "_engine_kernel")
     ],
     cmdclass={"build_ext": BuildExt},
 )

@@ -65,9 +65,13 @@ def bench_command(args: argparse.Namespace) -> int:
     rows = run_benchmark(env_ids, sizes, args.rounds, progress=_to_stderr, actions=actions)
     table = format_table(rows)
     print(table)
-    from ssme_envs.models.nozzle_joint import KERNEL
+    from ssme_envs.models import engine_step, nozzle_joint
 
-    joint = f"The nozzle joint ran its {'compiled kernel' if KERNEL == 'compiled' else 'Python reference'}."
+    ran = lambda kernel: "compiled kernel" if kernel == "compiled" else "Python reference"  # noqa: E731
+    joint = (
+        f"The nozzle joint ran its {ran(nozzle_joint.KERNEL)}, "
+        f"the engine's float step its {ran(engine_step.KERNEL)}."
+    )
     print(joint)
     if args.out is not None:
         write_text(args.out, "Command: `ssme-envs bench`\n\n" + table + "\n\n" + joint + "\n")

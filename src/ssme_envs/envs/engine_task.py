@@ -27,12 +27,14 @@ from ssme_envs.envs.task import (
     check_number,
     check_numbers,
 )
+from ssme_envs.models import engine_step
 from ssme_envs.models.engine import TruthConfig, check_plant_gain, check_stable_plant, output_coupling
 from ssme_envs.models.engine_nonlinear import NonlinearEngine
 from ssme_envs.models.engine_step import (
     StepParameters,
     dynamics_pair_floats,
     pair_rows,
+    pair_table,
     step_arrays,
     valves_pair_floats,
 )
@@ -106,6 +108,9 @@ class EngineTask:
     fault_step: int = field(init=False)  # the step after which the fault acts (-1: none)
     # largest reward loss of one step inside the envelope (errors and valve rates at their bounds)
     step_cost_bound: float = field(init=False)
+    # the compiled float step's arguments after the commands (nominal valves, half the backlash,
+    # stiction, engine_step.pair_table's table and width), None without the kernel
+    kernel_args: tuple | None = field(init=False, repr=False)
 
     observation: ClassVar[Observation] = ENGINE_OBSERVATION
     action_names: ClassVar[tuple[str, ...]] = ("OPOV", "FPOV")
@@ -191,6 +196,12 @@ class EngineTask:
                 self.params.stiction,
             ),
         )
+        if engine_step._KERNEL is None:
+            object.__setattr__(self, "kernel_args", None)
+        else:
+            object.__setattr__(
+                self, "kernel_args", (0.0, 0.0, *self.rows[3:], *pair_table([(lam, self.rows[0])]))
+            )
         object.__setattr__(self, "noise_scale", tuple(self.noise_std.tolist()))
         object.__setattr__(self, "noise_scale_arrays", tuple(np.full(1, s) for s in self.noise_scale))
         offsets = None if self.offset_table is None else Schedule.of(self.offset_table)
@@ -298,6 +309,11 @@ class EngineTask:
             return EnginePlant(x, linkage, valve), x[-2], x[-1]
         pairs, g0, g1, half, stick = self.rows
         x, linkage, valve = plant
+        if self.kernel_args is not None:  # the same operations, compiled
+            x, linkage, valve = engine_step._KERNEL.pair_step(
+                x, linkage, valve, *command, *self.kernel_args, 0
+            )
+            return EnginePlant(x, linkage, valve), x[-2], x[-1]
         linkage, (v0, v1) = valves_pair_floats(linkage, valve, *command, half, stick)
         x = dynamics_pair_floats(x, v0 + g0 * abs(v0), v1 + g1 * abs(v1), pairs)
         return EnginePlant(x, linkage, (v0, v1)), x[-2], x[-1]

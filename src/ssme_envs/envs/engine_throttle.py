@@ -14,12 +14,14 @@ from ssme_envs.envs.engine_task import EnginePlant, EngineTask, resolve_truth
 from ssme_envs.envs.engine_tracking import EngineTrackingEnv
 from ssme_envs.envs.references import Fault
 from ssme_envs.envs.task import MAX_EPISODE_SECONDS, Carrier, Schedule, Value
+from ssme_envs.models import engine_step
 from ssme_envs.models.engine import ENGINE_DT, TruthConfig
 from ssme_envs.models.engine_nonlinear import NonlinearEngine
 from ssme_envs.models.engine_step import (
     dynamics_arrays,
     dynamics_pair_offset_floats,
     pair_rows,
+    pair_table,
     valves_arrays,
     valves_pair_floats,
 )
@@ -97,6 +99,9 @@ class ThrottleTask(EngineTask):
         ]
         object.__setattr__(self, "schedule", Schedule(per_step, np.ascontiguousarray(np.concatenate(rows))))
         object.__setattr__(self, "schedule_parts", parts)
+        if self.kernel_args is not None:  # the rows of every step of the schedule
+            table = pair_table((lam, rows) for rows, lam in per_step)
+            object.__setattr__(self, "kernel_args", (*self.rows[3:], *table))
 
     @classmethod
     def build_throttle(
@@ -195,8 +200,13 @@ class ThrottleTask(EngineTask):
             x = dynamics_arrays(x, u_star, shift, k, b)
             x += offset  # in place: the same sum, without a third (n, N) array
         else:
-            rows, (g0, g1) = ops.at(self.schedule, t)
             half, stick = self.rows[3:]
+            if self.kernel_args is not None:  # the same operations, compiled
+                x, linkage, valve = engine_step._KERNEL.pair_step(
+                    x, linkage, valve, *command, *nominal, *self.kernel_args, t - 1
+                )
+                return EnginePlant(x, linkage, valve), x[-2], x[-1]
+            rows, (g0, g1) = ops.at(self.schedule, t)
             linkage, (v0, v1) = valves_pair_floats(linkage, valve, *command, half, stick)
             n0, n1 = nominal
             x = dynamics_pair_offset_floats(x, v0 + g0 * abs(v0 - n0), v1 + g1 * abs(v1 - n1), rows)

@@ -6,10 +6,15 @@ same order, so that an engine gives the same bits alone or batched."""
 
 from __future__ import annotations
 
+import math
+import struct
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+from ssme_envs.models.kernels import load_kernel
 
 if TYPE_CHECKING:
     from ssme_envs.models.engine import TruthConfig
@@ -201,3 +206,72 @@ def step_arrays(
 def _column(gain: np.ndarray, j: int) -> np.ndarray:
     """Column j of a gain as (n, 1) to multiply a row of N engines, or (n, N) when per engine."""
     return gain[:, j, None] if gain.ndim == 2 else gain[:, j]
+
+
+# The two-valve float step compiled (_engine_kernel.c): pair_step(x, linkage, valve, c0, c1, n0,
+# n1, half, stick, table, width, step) -> (x, linkage, valve) runs valves_pair_floats, the gains
+# u* = v + (lambda - 1)|v - n| and dynamics_pair_floats (width 5) or dynamics_pair_offset_floats
+# (width 6) on one step's rows of a packed table, in the reference's operations and order.
+
+
+def pair_table(steps: Iterable[tuple[Sequence[float], tuple]]) -> tuple[bytes, int]:
+    """The kernel's packed float64 table of (lambda - 1 of both valves, per-state rows of
+    :func:`pair_rows`, with each state's offset last for the linked model) per step, and its
+    width (5, or 6 with offsets)."""
+    flat: list[float] = []
+    widths = set()
+    for lam, rows in steps:
+        flat += lam
+        for row in rows:
+            flat += row
+            widths.add(len(row))
+    (width,) = widths
+    return np.array(flat, dtype=np.float64).tobytes(), width
+
+
+def pair_step_reference(
+    x: list, linkage: tuple, valve: tuple, c0: float, c1: float, n0: float, n1: float,
+    half: float, stick: float, lam: Sequence[float], rows: tuple,
+) -> tuple[list, tuple, tuple]:  # fmt: skip
+    """What the kernel's ``pair_step`` computes, on the Python floats: the reference it is
+    checked against."""
+    linkage, (v0, v1) = valves_pair_floats(linkage, valve, c0, c1, half, stick)
+    u0, u1 = v0 + lam[0] * abs(v0 - n0), v1 + lam[1] * abs(v1 - n1)
+    dynamics = dynamics_pair_offset_floats if len(rows[0]) == 6 else dynamics_pair_floats
+    return dynamics(x, u0, u1, rows), linkage, (v0, v1)
+
+
+def _kernel_agrees(kernel: Any) -> bool:
+    """Whether ``kernel.pair_step`` gives :func:`pair_step_reference`'s bits on a check set: both
+    widths, backlash and stiction on and off, signed zeros, NaN and inf."""
+    special = [0.0, -0.0, 1e-300, -3.5e-3, 0.02, math.inf, math.nan]
+    states = [[0.3, -0.0, 1.5e-3, -0.7], [math.nan, 2.0, -0.0, 1e300], [0.0, 0.0, -2.5e-3, 0.011]]
+    rows = ((-1, 0.31, -0.2, 0.05, 1e-3), (0, -0.4, 0.9, -0.0, 0.2), (-1, 1.7, 0.25, 0.3, -0.6),
+            (2, 0.05, -0.8, 2.0, 0.01))  # fmt: skip
+    lam = (0.125, -0.3)
+    for width in (5, 6):
+        table_rows = rows if width == 5 else tuple((*row, 0.25 * i - 0.5) for i, row in enumerate(rows))
+        table, _ = pair_table([((0.0, 0.0), table_rows), (lam, table_rows)])
+        for k, x in enumerate(states):
+            for c0, c1 in zip(special, special[::-1]):
+                for half, stick in ((0.0, 0.0), (1e-3, 0.0), (0.0, 2e-3), (1e-3, 2e-3)):
+                    args = (x, (0.01, -0.0), (-0.02, 0.004), c0, c1, 0.1 * k, -0.2 * k, half, stick)
+                    got = kernel.pair_step(*args, table, width, 1)
+                    want = pair_step_reference(*args, lam, table_rows)
+                    if not _same_bits(got, want):
+                        return False
+    return True
+
+
+def _same_bits(a: Any, b: Any) -> bool:
+    """Whether two (x, linkage, valve) hold the same floats bit for bit (-0.0 apart from 0.0),
+    any NaN equal to any NaN (a NaN's payload is not part of the arithmetic's contract)."""
+    flat_a, flat_b = ([*x, *linkage, *valve] for x, linkage, valve in (a, b))
+    return len(flat_a) == len(flat_b) and all(
+        (p != p and q != q) or struct.pack("<d", p) == struct.pack("<d", q)
+        for p, q in zip(flat_a, flat_b, strict=True)
+    )
+
+
+_KERNEL = load_kernel("_engine_kernel", _kernel_agrees, "engine")  # the module, or None: the reference
+KERNEL = "python" if _KERNEL is None else "compiled"  # which arithmetic the tasks' float step runs

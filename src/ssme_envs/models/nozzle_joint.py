@@ -9,8 +9,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import warnings
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, fields
 from functools import cache
@@ -20,6 +18,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from ssme_envs.models.joint_power import power_array, power_float, tables
+from ssme_envs.models.kernels import load_kernel
 from ssme_envs.models.linear import finite_float
 
 NOZZLE_DT = 0.008  # s, the paper's decimated sample time
@@ -315,29 +314,8 @@ def _kernel_agrees(kernel: Any) -> bool:
 
 
 def _load_kernel() -> Any:
-    """The compiled kernel where it was built and :func:`_kernel_agrees`; None otherwise (or where
-    the environment variable ``SSME_ENVS_NO_KERNEL`` is set), with a warning where it was built
-    but differs (a compiler that fused or reordered operations, or a build of an older source)."""
-    if os.environ.get("SSME_ENVS_NO_KERNEL"):  # the reference, on request (same bits, slower)
-        return None
-    try:
-        from ssme_envs.models import _joint_kernel  # type: ignore[attr-defined]
-    except ImportError:
-        return None
-    try:
-        agrees = _kernel_agrees(_joint_kernel)
-    except (AttributeError, TypeError, ValueError):  # a build of an older source: its calls differ
-        agrees = False
-    if not agrees:
-        warnings.warn(
-            "ssme_envs: the compiled nozzle kernel differs from its reference and is not used "
-            "(rebuild it, `pip install .`, with a compiler that neither fuses multiply-adds nor "
-            "uses fast math)",
-            RuntimeWarning,
-            stacklevel=2,
-        )
-        return None
-    return _joint_kernel
+    """The compiled kernel where it was built and :func:`_kernel_agrees` (:func:`load_kernel`)."""
+    return load_kernel("_joint_kernel", _kernel_agrees, "nozzle")
 
 
 _KERNEL = _load_kernel()
