@@ -32,11 +32,10 @@ from ssme_envs.models.engine import TruthConfig, check_plant_gain, check_stable_
 from ssme_envs.models.engine_nonlinear import NonlinearEngine
 from ssme_envs.models.engine_step import (
     StepParameters,
-    dynamics_pair_floats,
     pair_rows,
+    pair_step_reference,
     pair_table,
     step_arrays,
-    valves_pair_floats,
 )
 from ssme_envs.models.linked import LinkedEngineModel
 from ssme_envs.models.statespace import AlphaCanonicalModel
@@ -307,16 +306,16 @@ class EngineTask:
         if ops.batched:
             x, linkage, valve = step_arrays(*plant, command, self.params)
             return EnginePlant(x, linkage, valve), x[-2], x[-1]
-        pairs, g0, g1, half, stick = self.rows
         x, linkage, valve = plant
-        if self.kernel_args is not None:  # the same operations, compiled
-            x, linkage, valve = engine_step._KERNEL.pair_step(
-                x, linkage, valve, *command, *self.kernel_args, 0
+        if self.kernel_args is not None:  # the reference's operations, compiled
+            kernel = engine_step._KERNEL
+            x, linkage, valve = kernel.pair_step(x, linkage, valve, *command, *self.kernel_args, 0)
+        else:  # gains about zero: |v - 0| is |v|, bit for bit
+            pairs, g0, g1, half, stick = self.rows
+            x, linkage, valve = pair_step_reference(
+                x, linkage, valve, *command, 0.0, 0.0, half, stick, (g0, g1), pairs
             )
-            return EnginePlant(x, linkage, valve), x[-2], x[-1]
-        linkage, (v0, v1) = valves_pair_floats(linkage, valve, *command, half, stick)
-        x = dynamics_pair_floats(x, v0 + g0 * abs(v0), v1 + g1 * abs(v1), pairs)
-        return EnginePlant(x, linkage, (v0, v1)), x[-2], x[-1]
+        return EnginePlant(x, linkage, valve), x[-2], x[-1]
 
     @staticmethod
     def valve_positions(plant: EnginePlant) -> Any:

@@ -19,11 +19,10 @@ from ssme_envs.models.engine import ENGINE_DT, TruthConfig
 from ssme_envs.models.engine_nonlinear import NonlinearEngine
 from ssme_envs.models.engine_step import (
     dynamics_arrays,
-    dynamics_pair_offset_floats,
     pair_rows,
+    pair_step_reference,
     pair_table,
     valves_arrays,
-    valves_pair_floats,
 )
 from ssme_envs.models.linked import POWER_RANGE, LinkedEngineModel
 
@@ -199,18 +198,14 @@ class ThrottleTask(EngineTask):
             u_star = valve + lam * np.abs(valve - nominal)
             x = dynamics_arrays(x, u_star, shift, k, b)
             x += offset  # in place: the same sum, without a third (n, N) array
+        elif self.kernel_args is not None:  # the reference's operations, compiled
+            x, linkage, valve = engine_step._KERNEL.pair_step(
+                x, linkage, valve, *command, *nominal, *self.kernel_args, t - 1
+            )
         else:
-            half, stick = self.rows[3:]
-            if self.kernel_args is not None:  # the same operations, compiled
-                x, linkage, valve = engine_step._KERNEL.pair_step(
-                    x, linkage, valve, *command, *nominal, *self.kernel_args, t - 1
-                )
-                return EnginePlant(x, linkage, valve), x[-2], x[-1]
-            rows, (g0, g1) = ops.at(self.schedule, t)
-            linkage, (v0, v1) = valves_pair_floats(linkage, valve, *command, half, stick)
-            n0, n1 = nominal
-            x = dynamics_pair_offset_floats(x, v0 + g0 * abs(v0 - n0), v1 + g1 * abs(v1 - n1), rows)
-            valve = (v0, v1)
+            rows, lam = ops.at(self.schedule, t)
+            valves = (*command, *nominal, *self.rows[3:])  # commands, nominals, backlash, stiction
+            x, linkage, valve = pair_step_reference(x, linkage, valve, *valves, lam, rows)
         return EnginePlant(x, linkage, valve), x[-2], x[-1]
 
 
