@@ -72,3 +72,25 @@ def sync_equal(env_id, num_envs, steps, seed, action_scale_up, mode=AutoresetMod
                 np.testing.assert_array_equal(ra[4]["final_obs"][i], rb[4]["final_obs"][i])
         ends += int((ra[2] | ra[3]).sum())
     return ends
+
+
+def random_rollout(env_id: str, seed: int, batched: bool, steps: int, num_envs: int, **options) -> list:
+    """Observations and rewards of ``steps`` uniform random float32 actions from a generator
+    seeded ``seed``: one env (reset when its episode ends) or a native vector env of
+    ``num_envs`` (autoresetting). Two runs compare bit for bit."""
+    if batched:
+        env = gym.make_vec(env_id, num_envs=num_envs, vectorization_mode="vector_entry_point", **options)
+    else:
+        env = gym.make(env_id, disable_env_checker=True, **options)
+    obs, _ = env.reset(seed=seed)
+    rng = np.random.default_rng(seed)
+    out = [obs]
+    for _ in range(steps):
+        obs, reward, terminated, truncated, _ = env.step(
+            rng.uniform(-1, 1, env.action_space.shape).astype(np.float32)
+        )
+        out += [obs, np.asarray(reward)]
+        if not batched and (terminated or truncated):
+            out.append(env.reset()[0])
+    env.close()
+    return out

@@ -14,9 +14,9 @@ import sys
 import types
 import warnings
 
-import gymnasium as gym
 import numpy as np
 import pytest
+from conftest import random_rollout
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -96,24 +96,6 @@ def test_the_kernel_refuses_a_table_it_would_read_past() -> None:
         engine_step._KERNEL.pair_step((0.0, 0.0), *args[1:], table, width, 0)
 
 
-def _rollout(env_id: str, seed: int, batched: bool, **options) -> list[np.ndarray]:
-    """Observations and rewards of 300 random-action steps, one env or a vector env of 3."""
-    if batched:
-        env = gym.make_vec(env_id, num_envs=3, vectorization_mode="vector_entry_point", **options)
-    else:
-        env = gym.make(env_id, disable_env_checker=True, **options)
-    obs, _ = env.reset(seed=seed)
-    rng = np.random.default_rng(seed)
-    out = [obs]
-    for _ in range(300):
-        obs, reward, terminated, truncated, _ = env.step(rng.uniform(-1, 1, (3, 2) if batched else 2))
-        out += [obs, np.asarray(reward)]
-        if not batched and (terminated or truncated):
-            out.append(env.reset()[0])
-    env.close()
-    return out
-
-
 @compiled
 @settings(max_examples=8, deadline=None)
 @given(
@@ -132,10 +114,10 @@ def _rollout(env_id: str, seed: int, batched: bool, **options) -> list[np.ndarra
 )
 def test_the_engine_envs_give_the_same_bits_with_and_without_the_kernel(env_id, seed, options) -> None:
     """The single env with the kernel against the single env on the reference."""
-    with_kernel = _rollout(env_id, seed, False, **options)
+    with_kernel = random_rollout(env_id, seed, False, 300, 1, **options)
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(engine_step, "_KERNEL", None)
-        reference = _rollout(env_id, seed, False, **options)
+        reference = random_rollout(env_id, seed, False, 300, 1, **options)
     assert len(with_kernel) == len(reference)
     assert all(np.array_equal(a, b) for a, b in zip(with_kernel, reference, strict=True))
 

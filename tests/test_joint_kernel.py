@@ -12,9 +12,9 @@ import sys
 import types
 import warnings
 
-import gymnasium as gym
 import numpy as np
 import pytest
+from conftest import random_rollout
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -153,26 +153,6 @@ def test_a_kernel_that_differs_from_the_reference_is_refused(monkeypatch) -> Non
         assert nozzle_joint._load_kernel() is fake
 
 
-def _launcher_rollout(batched: bool, seed: int, **options) -> list[np.ndarray]:
-    """Observations and rewards of 120 random-action steps of LauncherPitch, one env or a vector
-    env of 6 (episodes ending and restarting)."""
-    if batched:
-        env = gym.make_vec(LAUNCHER, num_envs=6, vectorization_mode="vector_entry_point", **options)
-    else:
-        env = gym.make(LAUNCHER, disable_env_checker=True, **options)
-    obs, _ = env.reset(seed=seed)
-    rng = np.random.default_rng(seed)
-    out = [obs]
-    for _ in range(120):
-        shape = (6, 1) if batched else (1,)
-        obs, reward, terminated, truncated, _ = env.step(rng.uniform(-1, 1, shape).astype(np.float32))
-        out += [obs, np.asarray(reward)]
-        if not batched and (terminated or truncated):
-            out.append(env.reset()[0])
-    env.close()
-    return out
-
-
 @compiled
 @settings(max_examples=6, deadline=None)
 @given(
@@ -189,12 +169,12 @@ def _launcher_rollout(batched: bool, seed: int, **options) -> list[np.ndarray]:
 )
 def test_launcher_gives_the_same_bits_with_and_without_the_kernels_servo(seed, options, batched):
     """The kernel's servo loop against the Python loop over the Python integrators."""
-    with_kernel = _launcher_rollout(batched, seed, **options)
+    with_kernel = random_rollout(LAUNCHER, seed, batched, 120, 6, **options)
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(launcher_pitch, "compiled_servo", lambda batched: None)
         patch.setattr(nozzle_task, "rk4_floats", nozzle_joint._rk4_floats_py)
         patch.setattr(nozzle_task, "rk4_arrays", nozzle_joint._rk4_arrays_py)
-        reference = _launcher_rollout(batched, seed, **options)
+        reference = random_rollout(LAUNCHER, seed, batched, 120, 6, **options)
     assert len(with_kernel) == len(reference)
     assert all(np.array_equal(a, b) for a, b in zip(with_kernel, reference, strict=True))
 
