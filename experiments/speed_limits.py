@@ -77,10 +77,9 @@ def rk4_on_floats(env_id: str, rounds: int, integrator=rk4_floats) -> float:
     )
 
 
-def engine_on_floats(env_id: str, rounds: int) -> float:
+def engine_on_floats(task: EngineTask, rounds: int) -> float:
     """Seconds of one engine's plant step on floats (valves and dynamics, as the single env
     runs it: the compiled float step where it was built), at the zero command of step 1."""
-    task = catalogue.spec(env_id).build_task()
     plant = task.initial_plant(None)
     nominal = None if task.offsets is None else FLOATS.at(task.offsets, 1)
     per = 20_000
@@ -93,8 +92,9 @@ def engine_on_floats(env_id: str, rounds: int) -> float:
 def plant_on_floats(env_id: str, rounds: int) -> float:
     """Seconds of one env step's plant arithmetic on one env: the engine's plant step, or the
     joint's RK4 steps."""
-    if isinstance(catalogue.spec(env_id).build_task(), EngineTask):
-        return engine_on_floats(env_id, rounds)
+    task = catalogue.spec(env_id).build_task()
+    if isinstance(task, EngineTask):
+        return engine_on_floats(task, rounds)
     return rk4_on_floats(env_id, rounds)
 
 

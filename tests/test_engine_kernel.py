@@ -81,6 +81,18 @@ def test_the_kernel_gives_the_references_bits(model, x_seed, specials, linkage, 
 
 
 @compiled
+@pytest.mark.parametrize("n", [64, 65, 300])
+def test_a_model_of_many_states_gives_the_references_bits(n: int) -> None:
+    """Past the kernel's stack buffer (64 states) the states go to the heap: the same bits."""
+    rng = np.random.default_rng(n)
+    rows = tuple((int(rng.integers(-1, n)), *rng.normal(0.0, 0.5, 5).tolist()) for _ in range(n))
+    table, width = pair_table([((0.2, -0.1), rows)])
+    args = (rng.normal(0.0, 0.1, n).tolist(), (0.01, -0.02), (0.0, 0.03), 0.05, -0.04, 0.01, 0.02, 1e-3, 2e-3)
+    got = engine_step._KERNEL.pair_step(*args, table, width, 0)
+    assert _bits(got) == _bits(pair_step_reference(*args, (0.2, -0.1), rows))
+
+
+@compiled
 def test_the_kernel_refuses_a_table_it_would_read_past() -> None:
     rows = ((-1, 0.1, 0.2, 0.3, 0.4), (0, 0.1, 0.2, 0.3, 0.4))
     table, width = pair_table([((0.0, 0.0), rows)])

@@ -67,10 +67,10 @@ def bench_command(args: argparse.Namespace) -> int:
     print(table)
     from ssme_envs.models import engine_step, nozzle_joint
 
-    ran = lambda kernel: "compiled kernel" if kernel == "compiled" else "Python reference"  # noqa: E731
+    ran = {"compiled": "compiled kernel", "python": "Python reference"}
     joint = (
-        f"The nozzle joint ran its {ran(nozzle_joint.KERNEL)}, "
-        f"the engine's float step its {ran(engine_step.KERNEL)}."
+        f"The nozzle joint ran its {ran[nozzle_joint.KERNEL]}, "
+        f"the engine's float step its {ran[engine_step.KERNEL]}."
     )
     print(joint)
     if args.out is not None:

@@ -55,23 +55,34 @@ static PyObject *pair_step(PyObject *self, PyObject *const *args, Py_ssize_t nar
     Py_ssize_t n = PyList_GET_SIZE(xs), width = PyLong_AsSsize_t(args[10]), step = PyLong_AsSsize_t(args[11]);
     if (PyErr_Occurred())
         return NULL;
-    Py_ssize_t per_step = 2 + n * width;
-    if (n < 2 || n > 64 || (width != 5 && width != 6) || step < 0 ||
-        (step + 1) * per_step * (Py_ssize_t)sizeof(double) > PyBytes_GET_SIZE(table)) {
-        PyErr_SetString(PyExc_ValueError, "pair_step: 2-64 states, width 5 or 6, a step inside the table");
+    Py_ssize_t per_step = 2 + n * width, table_doubles = PyBytes_GET_SIZE(table) / (Py_ssize_t)sizeof(double);
+    if (n < 2 || (width != 5 && width != 6) || step < 0 || step >= table_doubles / per_step) {
+        PyErr_SetString(PyExc_ValueError, "pair_step: 2 or more states, width 5 or 6, a step inside the table");
         return NULL;
     }
-    double l0, l1, v0, v1, x[64];
+    const double *rows = (const double *)PyBytes_AS_STRING(table) + step * per_step;
+    for (Py_ssize_t i = 0; i < n; i++)
+        if (rows[2 + i * width] >= (double)n) {
+            PyErr_SetString(PyExc_ValueError, "pair_step: a shift source beyond the states");
+            return NULL;
+        }
+    double l0, l1, v0, v1;
     int err = 0;
     if (pair(args[1], &l0, &l1, "linkage") < 0 || pair(args[2], &v0, &v1, "valve") < 0)
         return NULL;
     double c0 = number(args[3], &err), c1 = number(args[4], &err), n0 = number(args[5], &err);
     double n1 = number(args[6], &err), half = number(args[7], &err), stick = number(args[8], &err);
-    for (Py_ssize_t i = 0; i < n; i++)
-        x[i] = number(PyList_GET_ITEM(xs, i), &err);
     if (err)
         return NULL;
-    const double *rows = (const double *)PyBytes_AS_STRING(table) + step * per_step;
+    /* the old states, read before the list is built: on the stack for the SSME's few */
+    double stack[64], *x = n <= 64 ? stack : PyMem_Malloc(n * sizeof(double));
+    if (x == NULL)
+        return PyErr_NoMemory();
+    for (Py_ssize_t i = 0; i < n; i++)
+        x[i] = number(PyList_GET_ITEM(xs, i), &err);
+    PyObject *out = err ? NULL : PyList_New(n);
+    if (out == NULL)
+        goto done;
 
     /* backlash: min(max(l, c - h), c + h) as the builtins decide; then stiction */
     if (half != 0.0) {
@@ -92,29 +103,25 @@ static PyObject *pair_step(PyObject *self, PyObject *const *args, Py_ssize_t nar
     }
     double u0 = v0 + rows[0] * fabs(v0 - n0), u1 = v1 + rows[1] * fabs(v1 - n1);
     double y0 = x[n - 2], y1 = x[n - 1];
-
-    PyObject *out = PyList_New(n);
-    if (out == NULL)
-        return NULL;
     for (Py_ssize_t i = 0; i < n; i++) {
         const double *r = rows + 2 + i * width;
-        double ky = r[1] * y0 + r[2] * y1, value;
+        double ky = r[1] * y0 + r[2] * y1;
         long source = (long)r[0];
-        if (source >= n) {
-            Py_DECREF(out);
-            PyErr_SetString(PyExc_ValueError, "pair_step: a shift source beyond the states");
-            return NULL;
-        }
-        value = (source >= 0 ? x[source] + ky : ky) + (r[3] * u0 + r[4] * u1);
+        double value = (source >= 0 ? x[source] + ky : ky) + (r[3] * u0 + r[4] * u1);
         if (width == 6)
             value = value + r[5];
         PyObject *item = PyFloat_FromDouble(value);
         if (item == NULL) {
-            Py_DECREF(out);
-            return NULL;
+            Py_CLEAR(out);
+            goto done;
         }
         PyList_SET_ITEM(out, i, item);
     }
+done:
+    if (x != stack)
+        PyMem_Free(x);
+    if (out == NULL)
+        return NULL;
     return Py_BuildValue("(N(dd)(dd))", out, l0, l1, v0, v1);
 }
 
