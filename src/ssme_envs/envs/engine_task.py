@@ -9,6 +9,7 @@ from typing import Any, ClassVar, NamedTuple
 
 import numpy as np
 
+from ssme_envs.envs import engine_compiled
 from ssme_envs.envs.engine_models import design_model, resolve_plant, resolve_truth
 from ssme_envs.envs.engine_nonlinear_plant import NonlinearPlantCore, nonlinear_engine_of, nonlinear_task
 from ssme_envs.envs.references import (
@@ -110,6 +111,7 @@ class EngineTask:
     # the compiled float step's arguments after the commands (nominal valves, half the backlash,
     # stiction, engine_step.pair_table's table and width), None without the kernel
     kernel_args: tuple | None = field(init=False, repr=False)
+    batch_args: engine_compiled.BatchArgs | None = field(init=False, repr=False, compare=False)
 
     observation: ClassVar[Observation] = ENGINE_OBSERVATION
     action_names: ClassVar[tuple[str, ...]] = ("OPOV", "FPOV")
@@ -201,6 +203,7 @@ class EngineTask:
             object.__setattr__(
                 self, "kernel_args", (0.0, 0.0, *self.rows[3:], *pair_table([(lam, self.rows[0])]))
             )
+        table = None if self.kernel_args is None else self.kernel_args[-2:]
         object.__setattr__(self, "noise_scale", tuple(self.noise_std.tolist()))
         object.__setattr__(self, "noise_scale_arrays", tuple(np.full(1, s) for s in self.noise_scale))
         offsets = None if self.offset_table is None else Schedule.of(self.offset_table)
@@ -219,6 +222,8 @@ class EngineTask:
         object.__setattr__(
             self, "step_cost_bound", self.error_weight * 2 * error**2 + self.rate_weight * 2 * 2.0**2
         )
+        args = None if table is None else engine_compiled.batch_args(self, *table, scheduled=False)
+        object.__setattr__(self, "batch_args", args)
 
     def design_model(self, source: str = "identified") -> AlphaCanonicalModel:
         """The linear model a controller is designed on: :func:`design_model` at the env's power;
@@ -304,7 +309,10 @@ class EngineTask:
     ) -> tuple[EnginePlant, Value, Value]:
         """:meth:`plant_step` on the commands of both valves: a (2, N) array, or two floats."""
         if ops.batched:
-            x, linkage, valve = step_arrays(*plant, command, self.params)
+            if self.batch_args is not None:
+                x, linkage, valve = engine_compiled.plant_step(self, plant, command, t)  # in place
+            else:
+                x, linkage, valve = step_arrays(*plant, command, self.params)
             return EnginePlant(x, linkage, valve), x[-2], x[-1]
         x, linkage, valve = plant
         if self.kernel_args is not None:  # the reference's operations, compiled
@@ -328,6 +336,11 @@ class EngineTask:
         """One step, as :class:`~ssme_envs.envs.task.TrackingTask` says: actions in [-1, 1]
         (OPOV, FPOV), the sensor noise in unit draws. Returns (state, the 10 observation values,
         reward, terminated)."""
+        if ops.batched and self.batch_args is not None:  # these operations, compiled
+            (plant, *rest), values, reward, terminated = engine_compiled.task_step(
+                self, state, action, t, ref, noise
+            )
+            return EngineState(plant, *rest), values, reward, terminated
         plant, integral, prev, held = state
         a0, a1 = action[0], action[1]
         nominal = None

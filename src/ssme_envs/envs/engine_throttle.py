@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from ssme_envs.envs import engine_compiled
 from ssme_envs.envs.engine_nonlinear_plant import nonlinear_engine_of, nonlinear_task
 from ssme_envs.envs.engine_task import EnginePlant, EngineTask, resolve_truth
 from ssme_envs.envs.engine_tracking import EngineTrackingEnv
@@ -101,6 +102,7 @@ class ThrottleTask(EngineTask):
         if self.kernel_args is not None:  # the rows of every step of the schedule
             table = pair_table((lam, rows) for rows, lam in per_step)
             object.__setattr__(self, "kernel_args", (*self.rows[3:], *table))
+            object.__setattr__(self, "batch_args", engine_compiled.batch_args(self, *table, scheduled=True))
 
     @classmethod
     def build_throttle(
@@ -188,7 +190,9 @@ class ThrottleTask(EngineTask):
         """The linked model with the parameters of step t - 1 -> t (the plant core's float or
         array arithmetic, the same operations in the same order)."""
         x, linkage, valve = plant
-        if ops.batched:
+        if ops.batched and self.batch_args is not None:  # the operations below, compiled
+            x, linkage, valve = engine_compiled.plant_step(self, plant, command, t)
+        elif ops.batched:
             half, stick, shift = self.params.half_backlash, self.params.stiction, self.params.shift_source
             rows = ops.at(self.schedule, t)
             k, b, lam, offset = (

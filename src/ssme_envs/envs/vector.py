@@ -295,10 +295,14 @@ class TrackingVectorEnv(VectorEnv):
         self._state, values, reward, terminated = task.step(
             self._state, clipped, t, refs, noise, SYNCED if self._synced else GATHER
         )
-        # the observation values as rows of a float32 table, handed out transposed (N, columns)
-        table = np.empty((len(values), self.num_envs), dtype=np.float32)
-        for row, value in zip(table, values, strict=True):
-            row[...] = value
+        # the observation values as rows of a float32 table, handed out transposed (N, columns): a
+        # task's own fresh float32 table (the compiled engine step's), or one made here
+        if isinstance(values, np.ndarray) and values.dtype == np.float32:
+            table = values
+        else:
+            table = np.empty((len(values), self.num_envs), dtype=np.float32)
+            for row, value in zip(table, values, strict=True):
+                row[...] = value
         # into the observation bounds, as the scalar envs do: one pass over the table
         CLIP_UFUNC(table, self._low_col, self._high_col, out=table)
         obs = table.T

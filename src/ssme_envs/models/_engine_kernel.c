@@ -10,6 +10,7 @@
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
 #include <math.h>
+#include <string.h>
 
 static double number(PyObject *obj, int *err)
 {
@@ -30,6 +31,43 @@ static int pair(PyObject *obj, double *a, double *b, const char *name)
     *a = number(PySequence_Fast_GET_ITEM(obj, 0), &err);
     *b = number(PySequence_Fast_GET_ITEM(obj, 1), &err);
     return err ? -1 : 0;
+}
+
+/* One engine's valves and dynamics: backlash, min(max(l, c - h), c + h) as the builtins decide,
+ * then stiction; the gains u* = v + (lambda - 1)|v - n|; x_i <- (x_src(i) + (K_i0 y0 + K_i1 y1))
+ * + (B_i0 u0 + B_i1 u1) [+ offset_i]. x: the n old states (stride xs), next: the new (stride ns,
+ * not x); valves: linkage 0, 1 and valve 0, 1, updated; rows: one step's rows of the table. */
+static void engine_one(const double *x, Py_ssize_t xs, double *next, Py_ssize_t ns, Py_ssize_t n,
+                       double *valves, double c0, double c1, double n0, double n1, double half,
+                       double stick, const double *rows, Py_ssize_t width)
+{
+    double l0 = valves[0], l1 = valves[1], v0 = valves[2], v1 = valves[3];
+    if (half != 0.0) {
+        double lo = c0 - half, hi = c0 + half;
+        l0 = lo > l0 ? lo : l0;
+        l0 = hi < l0 ? hi : l0;
+        lo = c1 - half, hi = c1 + half;
+        l1 = lo > l1 ? lo : l1;
+        l1 = hi < l1 ? hi : l1;
+    } else {
+        l0 = c0, l1 = c1;
+    }
+    if (stick != 0.0) {
+        v0 = fabs(l0 - v0) > stick ? l0 : v0;
+        v1 = fabs(l1 - v1) > stick ? l1 : v1;
+    } else {
+        v0 = l0, v1 = l1;
+    }
+    double u0 = v0 + rows[0] * fabs(v0 - n0), u1 = v1 + rows[1] * fabs(v1 - n1);
+    double y0 = x[(n - 2) * xs], y1 = x[(n - 1) * xs];
+    for (Py_ssize_t i = 0; i < n; i++) {
+        const double *r = rows + 2 + i * width;
+        double ky = r[1] * y0 + r[2] * y1;
+        long source = (long)r[0];
+        double value = (source >= 0 ? x[source * xs] + ky : ky) + (r[3] * u0 + r[4] * u1);
+        next[i * ns] = width == 6 ? value + r[5] : value;
+    }
+    valves[0] = l0, valves[1] = l1, valves[2] = v0, valves[3] = v1;
 }
 
 /* pair_step(x, linkage, valve, c0, c1, n0, n1, half, stick, table, width, step)
@@ -75,7 +113,7 @@ static PyObject *pair_step(PyObject *self, PyObject *const *args, Py_ssize_t nar
     if (err)
         return NULL;
     /* the old states, read before the list is built: on the stack for the SSME's few */
-    double stack[64], *x = n <= 64 ? stack : PyMem_Malloc(n * sizeof(double));
+    double stack[64], stack_next[64], *x = n <= 64 ? stack : PyMem_Malloc(n * sizeof(double));
     if (x == NULL)
         return PyErr_NoMemory();
     for (Py_ssize_t i = 0; i < n; i++)
@@ -84,39 +122,25 @@ static PyObject *pair_step(PyObject *self, PyObject *const *args, Py_ssize_t nar
     if (out == NULL)
         goto done;
 
-    /* backlash: min(max(l, c - h), c + h) as the builtins decide; then stiction */
-    if (half != 0.0) {
-        double lo = c0 - half, hi = c0 + half;
-        l0 = lo > l0 ? lo : l0;
-        l0 = hi < l0 ? hi : l0;
-        lo = c1 - half, hi = c1 + half;
-        l1 = lo > l1 ? lo : l1;
-        l1 = hi < l1 ? hi : l1;
-    } else {
-        l0 = c0, l1 = c1;
+    double valves[4] = {l0, l1, v0, v1};
+    double *next = n <= 64 ? stack_next : PyMem_Malloc(n * sizeof(double));
+    if (next == NULL) {
+        Py_CLEAR(out);
+        PyErr_NoMemory();
+        goto done;
     }
-    if (stick != 0.0) {
-        v0 = fabs(l0 - v0) > stick ? l0 : v0;
-        v1 = fabs(l1 - v1) > stick ? l1 : v1;
-    } else {
-        v0 = l0, v1 = l1;
-    }
-    double u0 = v0 + rows[0] * fabs(v0 - n0), u1 = v1 + rows[1] * fabs(v1 - n1);
-    double y0 = x[n - 2], y1 = x[n - 1];
+    engine_one(x, 1, next, 1, n, valves, c0, c1, n0, n1, half, stick, rows, width);
+    l0 = valves[0], l1 = valves[1], v0 = valves[2], v1 = valves[3];
     for (Py_ssize_t i = 0; i < n; i++) {
-        const double *r = rows + 2 + i * width;
-        double ky = r[1] * y0 + r[2] * y1;
-        long source = (long)r[0];
-        double value = (source >= 0 ? x[source] + ky : ky) + (r[3] * u0 + r[4] * u1);
-        if (width == 6)
-            value = value + r[5];
-        PyObject *item = PyFloat_FromDouble(value);
+        PyObject *item = PyFloat_FromDouble(next[i]);
         if (item == NULL) {
             Py_CLEAR(out);
-            goto done;
+            break;
         }
         PyList_SET_ITEM(out, i, item);
     }
+    if (next != stack_next)
+        PyMem_Free(next);
 done:
     if (x != stack)
         PyMem_Free(x);
@@ -125,8 +149,438 @@ done:
     return Py_BuildValue("(N(dd)(dd))", out, l0, l1, v0, v1);
 }
 
+
+/* The batch forms: N engines as the vector envs hold them, state-major ((n, N) and (2, N) float64
+ * arrays, C-contiguous), stepped in place CHUNK envs at a time. Each stage is a loop over a
+ * chunk's envs (which the compiler turns into SIMD operations), and each env gets the operations
+ * of engine_one and the float step in their order: its bits. Every argument is checked before
+ * any state is written, so a refused call leaves the state as it was. */
+
+#define CHUNK 256
+
+enum { MAX_VIEWS = 24 };
+typedef struct {
+    Py_buffer views[MAX_VIEWS];
+    int count;
+} Views;
+
+static void release(Views *v)
+{
+    for (int i = 0; i < v->count; i++)
+        PyBuffer_Release(&v->views[i]);
+    v->count = 0;
+}
+
+/* a C-contiguous buffer of `count` items (count < 0: any number, into *items) of `itemsize`
+ * bytes and one of the format codes `codes`; NULL with an error otherwise */
+static void *take(Views *v, PyObject *obj, Py_ssize_t itemsize, const char *codes, Py_ssize_t count,
+                  int writable, const char *name, Py_ssize_t *items)
+{
+    Py_buffer *view = &v->views[v->count];
+    int flags = PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0);
+    if (v->count >= MAX_VIEWS || PyObject_GetBuffer(obj, view, flags) < 0)
+        return NULL;
+    v->count++;
+    const char *format = view->format == NULL ? "B" : view->format;
+    char code = format[0] == '<' || format[0] == '=' || format[0] == '@' ? format[1] : format[0];
+    if (view->itemsize != itemsize || code == '\0' || strchr(codes, code) == NULL
+        || (count >= 0 && view->len != count * itemsize)) {
+        PyErr_Format(PyExc_ValueError, "%s: a C-contiguous array of %zd items of type '%s' expected", name,
+                     count, codes);
+        return NULL;
+    }
+    if (items != NULL)
+        *items = view->len / itemsize;
+    return view->buf;
+}
+
+/* the config array's entries */
+enum { SCALE, S0, S1, DT, LIMIT, ERROR_WEIGHT, RATE_WEIGHT, ENVELOPE, COST_BOUND, HORIZON, FAULT_KIND,
+       FAULT_INDEX, MAGNITUDE, FAULT_STEP, HALF, STICK, WIDTH, SCHEDULED, CONFIG_SIZE };
+enum { NO_FAULT, STUCK_VALVE, GAIN_LOSS, SENSOR_BIAS };
+
+typedef struct {
+    const double *table, *offsets;
+    Py_ssize_t n, width, per_step, steps, offset_rows;
+    int scheduled;
+    double half, stick;
+} Plant;
+
+/* the table, offsets and config of a batch call, and the steps of every t, checked: the rows of
+ * step t - 1 (scheduled) or 0 in the table and, where offsets are given, a row t - 1 of them */
+static int plant_of(Plant *p, Views *v, PyObject *table, PyObject *offsets, const double *config,
+                    Py_ssize_t n, const long long *t, Py_ssize_t N)
+{
+    if (!PyBytes_Check(table)) {
+        PyErr_SetString(PyExc_TypeError, "table: bytes (engine_step.pair_table's)");
+        return -1;
+    }
+    p->n = n, p->width = (Py_ssize_t)config[WIDTH], p->scheduled = config[SCHEDULED] != 0.0;
+    p->half = config[HALF], p->stick = config[STICK];
+    p->table = (const double *)PyBytes_AS_STRING(table);
+    p->per_step = 2 + n * p->width;
+    p->steps = PyBytes_GET_SIZE(table) / (Py_ssize_t)sizeof(double) / p->per_step;
+    Py_ssize_t count;
+    p->offsets = take(v, offsets, sizeof(double), "d", -1, 0, "offsets", &count);
+    if (p->offsets == NULL)
+        return -1;
+    p->offset_rows = count / 2;
+    if (n < 2 || (p->width != 5 && p->width != 6) || p->steps < 1) {
+        PyErr_SetString(PyExc_ValueError, "batch step: 2 or more states, width 5 or 6, a table of a step or more");
+        return -1;
+    }
+    long long lo = t[0], hi = t[0];
+    for (Py_ssize_t j = 1; j < N; j++) {
+        lo = t[j] < lo ? t[j] : lo;
+        hi = t[j] > hi ? t[j] : hi;
+    }
+    if ((p->offset_rows > 0 || p->scheduled) && (lo < 1 || hi > p->offset_rows)) {
+        PyErr_SetString(PyExc_ValueError, "batch step: a step outside the nominal valves");
+        return -1;
+    }
+    Py_ssize_t first = p->scheduled ? (Py_ssize_t)(lo - 1) : 0, last = p->scheduled ? (Py_ssize_t)(hi - 1) : 0;
+    if (last >= p->steps) {
+        PyErr_SetString(PyExc_ValueError, "batch step: a step outside the table");
+        return -1;
+    }
+    for (Py_ssize_t step = first; step <= last; step++)
+        for (Py_ssize_t i = 0; i < n; i++)
+            if (p->table[step * p->per_step + 2 + i * p->width] >= (double)n) {
+                PyErr_SetString(PyExc_ValueError, "batch step: a shift source beyond the states");
+                return -1;
+            }
+    return 0;
+}
+
+static const double *rows_at(const Plant *p, long long t)
+{
+    return p->table + (p->scheduled ? (Py_ssize_t)(t - 1) : 0) * p->per_step;
+}
+
+/* the plant of envs [j0, j0 + b) under the commands c0, c1, the gains about g0, g1 (chunk
+ * arrays), in place; scratch: n CHUNK doubles. Envs at one step share its rows and go stage by
+ * stage; a chunk of envs at different steps (of a scheduled plant) goes env by env. */
+static void plant_chunk(const Plant *p, double *x, double *linkage, double *valve, Py_ssize_t N,
+                        Py_ssize_t j0, Py_ssize_t b, const long long *t, const double *c0,
+                        const double *c1, const double *g0, const double *g1, double *scratch)
+{
+    const Py_ssize_t n = p->n, width = p->width;
+    int same = 1;
+    for (Py_ssize_t k = 1; k < b && p->scheduled; k++)
+        same &= t[j0 + k] == t[j0];
+    if (!same) {
+        for (Py_ssize_t k = 0; k < b; k++) {
+            Py_ssize_t j = j0 + k;
+            for (Py_ssize_t i = 0; i < n; i++)
+                scratch[i] = x[i * N + j];
+            double valves[4] = {linkage[j], linkage[N + j], valve[j], valve[N + j]};
+            engine_one(scratch, 1, x + j, N, n, valves, c0[k], c1[k], g0[k], g1[k], p->half, p->stick,
+                       rows_at(p, t[j]), width);
+            linkage[j] = valves[0], linkage[N + j] = valves[1], valve[j] = valves[2], valve[N + j] = valves[3];
+        }
+        return;
+    }
+    const double *rows = rows_at(p, t[j0]);
+    double *restrict L0 = linkage + j0, *restrict L1 = linkage + N + j0;
+    double *restrict V0 = valve + j0, *restrict V1 = valve + N + j0;
+    const double half = p->half, stick = p->stick, lam0 = rows[0], lam1 = rows[1];
+    if (half != 0.0) {
+        for (Py_ssize_t k = 0; k < b; k++) {
+            double lo = c0[k] - half, hi = c0[k] + half, l = L0[k];
+            l = lo > l ? lo : l;
+            L0[k] = hi < l ? hi : l;
+            lo = c1[k] - half, hi = c1[k] + half, l = L1[k];
+            l = lo > l ? lo : l;
+            L1[k] = hi < l ? hi : l;
+        }
+    } else {
+        for (Py_ssize_t k = 0; k < b; k++)
+            L0[k] = c0[k], L1[k] = c1[k];
+    }
+    if (stick != 0.0) {
+        for (Py_ssize_t k = 0; k < b; k++) {
+            V0[k] = fabs(L0[k] - V0[k]) > stick ? L0[k] : V0[k];
+            V1[k] = fabs(L1[k] - V1[k]) > stick ? L1[k] : V1[k];
+        }
+    } else {
+        for (Py_ssize_t k = 0; k < b; k++)
+            V0[k] = L0[k], V1[k] = L1[k];
+    }
+    double u0[CHUNK], u1[CHUNK];
+    for (Py_ssize_t k = 0; k < b; k++) {
+        u0[k] = V0[k] + lam0 * fabs(V0[k] - g0[k]);
+        u1[k] = V1[k] + lam1 * fabs(V1[k] - g1[k]);
+    }
+    /* the new states into scratch (the old are read throughout), then over the old */
+    const double *restrict y0 = x + (n - 2) * N + j0, *restrict y1 = x + (n - 1) * N + j0;
+    for (Py_ssize_t i = 0; i < n; i++) {
+        const double *r = rows + 2 + i * width;
+        const double k0 = r[1], k1 = r[2], b0 = r[3], b1 = r[4];
+        const long source = (long)r[0];
+        double *restrict out = scratch + i * CHUNK;
+        if (source >= 0) {
+            const double *restrict xs = x + source * N + j0;
+            for (Py_ssize_t k = 0; k < b; k++)
+                out[k] = (xs[k] + (k0 * y0[k] + k1 * y1[k])) + (b0 * u0[k] + b1 * u1[k]);
+        } else {
+            for (Py_ssize_t k = 0; k < b; k++)
+                out[k] = (k0 * y0[k] + k1 * y1[k]) + (b0 * u0[k] + b1 * u1[k]);
+        }
+        if (width == 6) {
+            const double offset = r[5];
+            for (Py_ssize_t k = 0; k < b; k++)
+                out[k] = out[k] + offset;
+        }
+    }
+    for (Py_ssize_t i = 0; i < n; i++)
+        memcpy(x + i * N + j0, scratch + i * CHUNK, (size_t)b * sizeof(double));
+}
+
+/* the commands of envs [j0, j0 + b) (action * scale, the nominal valves added) and the gains'
+ * centres (the nominal valves when scheduled, else 0) */
+static void commands(const Plant *p, const double *action, Py_ssize_t N, Py_ssize_t j0, Py_ssize_t b,
+                     const long long *t, double scale, double *c0, double *c1, double *g0, double *g1)
+{
+    for (Py_ssize_t k = 0; k < b; k++) {
+        c0[k] = action[j0 + k] * scale, c1[k] = action[N + j0 + k] * scale;
+        g0[k] = 0.0, g1[k] = 0.0;
+    }
+    if (p->offset_rows == 0)
+        return;
+    for (Py_ssize_t k = 0; k < b; k++) {
+        const double *nominal = p->offsets + 2 * (t[j0 + k] - 1);
+        c0[k] = nominal[0] + c0[k], c1[k] = nominal[1] + c1[k];
+    }
+    for (Py_ssize_t k = 0; k < b && p->scheduled; k++) {
+        const double *nominal = p->offsets + 2 * (t[j0 + k] - 1);
+        g0[k] = nominal[0], g1[k] = nominal[1];
+    }
+}
+
+/* the measurements m = y + z s of a chunk's envs (z float32 unit noise) */
+static void measure(Py_ssize_t b, const double *restrict y0, const double *restrict y1, const float *restrict z0,
+                    const float *restrict z1, double s0, double s1, double *restrict m0, double *restrict m1)
+{
+    for (Py_ssize_t k = 0; k < b; k++) {
+        m0[k] = y0[k] + (double)z0[k] * s0;
+        m1[k] = y1[k] + (double)z1[k] * s1;
+    }
+}
+
+/* a chunk's references: its envs' own (each) or one for all */
+static void references(Py_ssize_t b, const double *restrict r, int each, double *restrict out)
+{
+    if (each)
+        memcpy(out, r, (size_t)b * sizeof(double));
+    else
+        for (Py_ssize_t k = 0; k < b; k++)
+            out[k] = r[0];
+}
+
+/* the observation values of a chunk's envs, rounded to float32 (as the envs hand them out):
+ * measurements and references in %, errors, integrals, the action */
+static void observations(Py_ssize_t b, float *values, Py_ssize_t N, const double *restrict m0,
+                         const double *restrict m1, const double *restrict ref0, const double *restrict ref1,
+                         const double *restrict e0, const double *restrict e1, const double *restrict i0,
+                         const double *restrict i1, const double *restrict a0, const double *restrict a1)
+{
+    float *restrict o[10];
+    for (int q = 0; q < 10; q++)
+        o[q] = values + q * N;
+    for (Py_ssize_t k = 0; k < b; k++) {
+        o[0][k] = (float)(100.0 * m0[k]), o[1][k] = (float)(100.0 * m1[k]);
+        o[2][k] = (float)(100.0 * ref0[k]), o[3][k] = (float)(100.0 * ref1[k]);
+        o[4][k] = (float)e0[k], o[5][k] = (float)e1[k], o[6][k] = (float)i0[k], o[7][k] = (float)i1[k];
+        o[8][k] = (float)a0[k], o[9][k] = (float)a1[k];
+    }
+}
+
+/* the errors e (in %), the integrals i (clipped as numpy's clip: min(max(x, lo), hi), NaN kept)
+ * and the reward without the termination penalty, of a chunk's envs */
+static void errors(Py_ssize_t b, const double *restrict ref0, const double *restrict ref1,
+                   const double *restrict m0, const double *restrict m1, double *restrict i0,
+                   double *restrict i1, const double *restrict a0, const double *restrict a1,
+                   const double *restrict p0, const double *restrict p1, double *restrict e0,
+                   double *restrict e1, double *restrict reward, double dt, double lim, double ew, double rw)
+{
+    for (Py_ssize_t k = 0; k < b; k++) {
+        const double f0 = 100.0 * (ref0[k] - m0[k]), f1 = 100.0 * (ref1[k] - m1[k]);
+        double q0 = i0[k] + f0 * dt, q1 = i1[k] + f1 * dt;
+        q0 = -lim > q0 ? -lim : q0;
+        q0 = lim < q0 ? lim : q0;
+        q1 = -lim > q1 ? -lim : q1;
+        q1 = lim < q1 ? lim : q1;
+        const double d0 = a0[k] - p0[k], d1 = a1[k] - p1[k];
+        reward[k] = -ew * (f0 * f0 + f1 * f1) - rw * (d0 * d0 + d1 * d1);
+        e0[k] = f0, e1[k] = f1, i0[k] = q0, i1[k] = q1;
+    }
+}
+
+/* plant_batch(x, linkage, valve, command, t, config, table, offsets) -> None
+ *
+ * N engines' valves and dynamics under the commands (2, N) of step t - 1 -> t, in place: the
+ * task's advance on arrays. config: engine_task's float64 config (half, stick, width and
+ * scheduled are read); offsets: the nominal valves per step ((T + 1, 2); the gains act about
+ * row t - 1 when scheduled). */
+static PyObject *plant_batch(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (nargs != 8) {
+        PyErr_SetString(PyExc_TypeError, "plant_batch(x, linkage, valve, command, t, config, table, offsets)");
+        return NULL;
+    }
+    Views v = {.count = 0};
+    Plant p;
+    PyObject *result = NULL;
+    double *scratch = NULL;
+    Py_ssize_t N, nN;
+    const long long *t = take(&v, args[4], 8, "lq", -1, 0, "t", &N);
+    double *x = t ? take(&v, args[0], 8, "d", -1, 1, "x", &nN) : NULL;
+    const double *config = x ? take(&v, args[5], 8, "d", CONFIG_SIZE, 0, "config", NULL) : NULL;
+    if (config == NULL)
+        goto done;
+    if (N < 1 || nN % N != 0) {
+        PyErr_SetString(PyExc_ValueError, "plant_batch: x of (n, N), t of (N,)");
+        goto done;
+    }
+    double *linkage = take(&v, args[1], 8, "d", 2 * N, 1, "linkage", NULL);
+    double *valve = linkage ? take(&v, args[2], 8, "d", 2 * N, 1, "valve", NULL) : NULL;
+    const double *command = valve ? take(&v, args[3], 8, "d", 2 * N, 0, "command", NULL) : NULL;
+    if (command == NULL || plant_of(&p, &v, args[6], args[7], config, nN / N, t, N) < 0)
+        goto done;
+    if ((scratch = PyMem_Malloc((size_t)p.n * CHUNK * sizeof(double))) == NULL) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    double g0[CHUNK], g1[CHUNK];
+    for (Py_ssize_t j0 = 0; j0 < N; j0 += CHUNK) {
+        Py_ssize_t b = N - j0 < CHUNK ? N - j0 : CHUNK;
+        for (Py_ssize_t k = 0; k < b; k++) {
+            const double *nominal = p.scheduled ? p.offsets + 2 * (t[j0 + k] - 1) : NULL;
+            g0[k] = nominal ? nominal[0] : 0.0, g1[k] = nominal ? nominal[1] : 0.0;
+        }
+        plant_chunk(&p, x, linkage, valve, N, j0, b, t, command + j0, command + N + j0, g0, g1, scratch);
+    }
+    result = Py_NewRef(Py_None);
+done:
+    PyMem_Free(scratch);
+    release(&v);
+    return result;
+}
+
+/* task_batch(x, linkage, valve, integral0, integral1, held, prev0, prev1, action, t, r0, r1,
+ *            z0, z1, values, reward, terminated, config, table, offsets) -> None
+ *
+ * One step of N engine tracking episodes, EngineTask.step's operations in its order: the valve
+ * commands (action * scale, the nominal valves added), the fault, the plant, the measurements
+ * (outputs plus the float32 unit noise z times its scale), errors, integrals (clipped), reward
+ * and termination (with its penalty). x, linkage, valve, integral0, integral1 and held are
+ * stepped in place; values (10, N) float32 (the observation values, rounded), reward and
+ * terminated are written. r0, r1: the references, N of them or one for all. */
+static PyObject *task_batch(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (nargs != 20) {
+        PyErr_SetString(PyExc_TypeError, "task_batch takes 20 arguments (engine_compiled.task_step's)");
+        return NULL;
+    }
+    Views v = {.count = 0};
+    Plant p;
+    PyObject *result = NULL;
+    double *scratch = NULL;
+    Py_ssize_t N, nN, nr0, nr1;
+    const long long *t = take(&v, args[9], 8, "lq", -1, 0, "t", &N);
+    double *x = t ? take(&v, args[0], 8, "d", -1, 1, "x", &nN) : NULL;
+    const double *config = x ? take(&v, args[17], 8, "d", CONFIG_SIZE, 0, "config", NULL) : NULL;
+    if (config == NULL)
+        goto done;
+    if (N < 1 || nN % N != 0) {
+        PyErr_SetString(PyExc_ValueError, "task_batch: x of (n, N), t of (N,)");
+        goto done;
+    }
+    double *io[5];
+    const char *io_names[5] = {"linkage", "valve", "integral0", "integral1", "held"};
+    Py_ssize_t io_counts[5] = {2 * N, 2 * N, N, N, N};
+    for (int k = 0; k < 5; k++)
+        if ((io[k] = take(&v, args[1 + k], 8, "d", io_counts[k], 1, io_names[k], NULL)) == NULL)
+            goto done;
+    const double *prev0 = take(&v, args[6], 8, "d", N, 0, "prev0", NULL);
+    const double *prev1 = prev0 ? take(&v, args[7], 8, "d", N, 0, "prev1", NULL) : NULL;
+    const double *action = prev1 ? take(&v, args[8], 8, "d", 2 * N, 0, "action", NULL) : NULL;
+    const double *r0 = action ? take(&v, args[10], 8, "d", -1, 0, "r0", &nr0) : NULL;
+    const double *r1 = r0 ? take(&v, args[11], 8, "d", -1, 0, "r1", &nr1) : NULL;
+    const float *z0 = r1 ? take(&v, args[12], 4, "f", N, 0, "z0", NULL) : NULL;
+    const float *z1 = z0 ? take(&v, args[13], 4, "f", N, 0, "z1", NULL) : NULL;
+    float *values = z1 ? take(&v, args[14], 4, "f", 10 * N, 1, "values", NULL) : NULL;
+    double *reward = values ? take(&v, args[15], 8, "d", N, 1, "reward", NULL) : NULL;
+    char *terminated = reward ? take(&v, args[16], 1, "?", N, 1, "terminated", NULL) : NULL;
+    if (terminated == NULL || plant_of(&p, &v, args[18], args[19], config, nN / N, t, N) < 0)
+        goto done;
+    if ((nr0 != N && nr0 != 1) || (nr1 != N && nr1 != 1)) {
+        PyErr_SetString(PyExc_ValueError, "task_batch: references of N envs or one for all");
+        goto done;
+    }
+    if ((scratch = PyMem_Malloc((size_t)p.n * CHUNK * sizeof(double))) == NULL) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    double *linkage = io[0], *valve = io[1], *integral0 = io[2], *integral1 = io[3], *held = io[4];
+    const Py_ssize_t n = p.n;
+    const double s0 = config[S0], s1 = config[S1], dt = config[DT], lim = config[LIMIT];
+    const double ew = config[ERROR_WEIGHT], rw = config[RATE_WEIGHT], envelope = config[ENVELOPE];
+    const double magnitude = config[MAGNITUDE], cost = config[COST_BOUND];
+    const long long fault_step = (long long)config[FAULT_STEP], horizon = (long long)config[HORIZON];
+    const int kind = (int)config[FAULT_KIND], index = (int)config[FAULT_INDEX] != 0;
+    double c0[CHUNK], c1[CHUNK], g0[CHUNK], g1[CHUNK], ref0[CHUNK], ref1[CHUNK];
+    double m0[CHUNK], m1[CHUNK], e0[CHUNK], e1[CHUNK];
+    for (Py_ssize_t j0 = 0; j0 < N; j0 += CHUNK) {
+        const Py_ssize_t b = N - j0 < CHUNK ? N - j0 : CHUNK;
+        const long long *tc = t + j0;
+        commands(&p, action, N, j0, b, t, config[SCALE], c0, c1, g0, g1);
+        double *ci = index ? c1 : c0;
+        if (kind == STUCK_VALVE) {
+            for (Py_ssize_t k = 0; k < b; k++) {
+                double h = tc[k] == fault_step + 1 ? ci[k] : held[j0 + k];
+                ci[k] = tc[k] > fault_step ? h : ci[k];
+                held[j0 + k] = h;
+            }
+        } else if (kind == GAIN_LOSS) {
+            for (Py_ssize_t k = 0; k < b; k++)
+                ci[k] = tc[k] > fault_step ? ci[k] * magnitude : ci[k];
+        }
+        plant_chunk(&p, x, linkage, valve, N, j0, b, t, c0, c1, g0, g1, scratch);
+        references(b, nr0 == N ? r0 + j0 : r0, nr0 == N, ref0);
+        references(b, nr1 == N ? r1 + j0 : r1, nr1 == N, ref1);
+        const double *restrict y0 = x + (n - 2) * N + j0, *restrict y1 = x + (n - 1) * N + j0;
+        const float *restrict w0 = z0 + j0, *restrict w1 = z1 + j0;
+        measure(b, y0, y1, w0, w1, s0, s1, m0, m1);
+        if (kind == SENSOR_BIAS) {
+            double *mi = index ? m1 : m0;
+            for (Py_ssize_t k = 0; k < b; k++)
+                mi[k] = tc[k] >= fault_step ? mi[k] + magnitude : mi[k];
+        }
+        double *restrict rew = reward + j0;
+        errors(b, ref0, ref1, m0, m1, integral0 + j0, integral1 + j0, action + j0, action + N + j0, prev0 + j0,
+               prev1 + j0, e0, e1, rew, dt, lim, ew, rw);
+        const double *restrict a0 = action + j0, *restrict a1 = action + N + j0;
+        const double *restrict i0 = integral0 + j0, *restrict i1 = integral1 + j0;
+        for (Py_ssize_t k = 0; k < b; k++) { /* termination: rare, its penalty env by env */
+            const int ended = (fabs(y0[k] - ref0[k]) > envelope) | (fabs(y1[k] - ref1[k]) > envelope);
+            terminated[j0 + k] = (char)ended;
+            if (ended)
+                rew[k] = rew[k] - cost * (double)(horizon - tc[k] + 1);
+        }
+        observations(b, values + j0, N, m0, m1, ref0, ref1, e0, e1, i0, i1, a0, a1);
+    }
+    result = Py_NewRef(Py_None);
+done:
+    PyMem_Free(scratch);
+    release(&v);
+    return result;
+}
+
 static PyMethodDef methods[] = {
     {"pair_step", (PyCFunction)(void (*)(void))pair_step, METH_FASTCALL, "One engine's valves and dynamics."},
+    {"plant_batch", (PyCFunction)(void (*)(void))plant_batch, METH_FASTCALL, "N engines' valves and dynamics."},
+    {"task_batch", (PyCFunction)(void (*)(void))task_batch, METH_FASTCALL, "One step of N engine tracking episodes."},
     {NULL, NULL, 0, NULL},
 };
 

@@ -1,0 +1,84 @@
+"""The engine tasks' batch step compiled: :meth:`EngineTask.step` and its plant on (N,) rows
+in one pass over the envs (``_engine_kernel.c``: ``task_batch``, ``plant_batch``).
+
+The kernel runs, env by env, the operations of the float step (the scalar env's) in their
+order, so a vector env still gives a scalar env's bits; the numpy batch step stays the
+reference where no kernel is built (``SSME_ENVS_NO_KERNEL``) and for the nonlinear engine.
+The tests hold the three to the same bits.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from ssme_envs.models import engine_step
+
+if TYPE_CHECKING:
+    from ssme_envs.envs.engine_task import EnginePlant, EngineState, EngineTask
+
+# the kernel's fault codes (task_batch's NO_FAULT, STUCK_VALVE, GAIN_LOSS, SENSOR_BIAS)
+_FAULT_CODES = {None: 0, "stuck_valve": 1, "gain_loss": 2, "sensor_bias": 3}
+
+
+class BatchArgs:
+    """What the kernel needs of a task beside its state: a float64 config (the kernel's
+    layout), the packed step table and the nominal valves per step ((T + 1, 2); empty for the
+    point model)."""
+
+    __slots__ = ("config", "offsets", "table")
+
+    def __init__(self, task: EngineTask, table: bytes, width: int, scheduled: bool) -> None:
+        fault = task.fault
+        self.config = np.array(
+            [
+                task.action_scale, *task.noise_scale, task.dt, task.integral_limit, task.error_weight,
+                task.rate_weight, task.envelope, task.step_cost_bound, task.horizon,
+                _FAULT_CODES[None if fault is None else fault.kind],
+                0 if fault is None else fault.index, 0.0 if fault is None else fault.magnitude,
+                task.fault_step, task.params.half_backlash, task.params.stiction, width, scheduled,
+            ],
+            dtype=np.float64,
+        )  # fmt: skip
+        self.table = table
+        offsets = np.zeros((0, 2)) if task.offset_table is None else task.offset_table
+        self.offsets = np.ascontiguousarray(offsets, dtype=np.float64)
+
+
+def batch_args(task: EngineTask, table: bytes, width: int, scheduled: bool) -> BatchArgs | None:
+    """The task's :class:`BatchArgs`, or None where the batch step stays numpy's: no kernel
+    built, or the nonlinear engine as the plant."""
+    if engine_step._KERNEL is None or task.nonlinear is not None:
+        return None
+    return BatchArgs(task, table, width, scheduled)
+
+
+def plant_step(task: EngineTask, plant: EnginePlant, command: np.ndarray, t: np.ndarray) -> EnginePlant:
+    """The task's plant on arrays under the commands (2, N) of step t - 1 -> t, stepped in place
+    (the arrays of ``plant``, returned)."""
+    args: BatchArgs = task.batch_args
+    engine_step._KERNEL.plant_batch(*plant, np.ascontiguousarray(command), t, args.config, args.table, args.offsets)
+    return plant
+
+
+def task_step(
+    task: EngineTask, state: EngineState, action: np.ndarray, t: np.ndarray, ref: Any, noise: Any
+) -> tuple[tuple, np.ndarray, np.ndarray, np.ndarray]:
+    """:meth:`EngineTask.step` on arrays, the state's arrays stepped in place: (plant, integral,
+    prev, held) (prev the rows of ``action``), the observation values (10, N) float64 (a buffer
+    of the task's that its next step overwrites: read before), reward, terminated. ``action``
+    (2, N) float64, ``noise`` rows float32."""
+    plant, integral, prev, held = state
+    n = len(t)
+    args: BatchArgs = task.batch_args
+    values = np.empty((10, n), dtype=np.float32)
+    reward, terminated = np.empty(n), np.empty(n, dtype=bool)
+    engine_step._KERNEL.task_batch(
+        *plant, *integral, held, *prev, action, t, ref[0], ref[1], noise[0], noise[1], values, reward,
+        terminated, args.config, args.table, args.offsets,
+    )  # fmt: skip
+    return (plant, integral, (action[0], action[1]), held), values, reward, terminated
+
+
+__all__ = ["BatchArgs", "batch_args", "plant_step", "task_step"]
