@@ -23,24 +23,34 @@ _FAULT_CODES = {None: 0, "stuck_valve": 1, "gain_loss": 2, "sensor_bias": 3}
 
 
 class BatchArgs:
-    """What the kernel needs of a task beside its state: a float64 config (the kernel's
-    layout), the packed step table and the nominal valves per step ((T + 1, 2); empty for the
-    point model)."""
+    """What the kernel needs of a task beside its state: its numbers as the kernel's config
+    (:func:`~ssme_envs.models.engine_step.batch_config`), the packed step table (``pair_table``)
+    and the nominal valves per step ((T + 1, 2); empty for the point model)."""
 
     __slots__ = ("config", "offsets", "table")
 
     def __init__(self, task: EngineTask, table: bytes, width: int, scheduled: bool) -> None:
         fault = task.fault
-        self.config = np.array(
-            [
-                task.action_scale, *task.noise_scale, task.dt, task.integral_limit, task.error_weight,
-                task.rate_weight, task.envelope, task.step_cost_bound, task.horizon,
-                _FAULT_CODES[None if fault is None else fault.kind],
-                0 if fault is None else fault.index, 0.0 if fault is None else fault.magnitude,
-                task.fault_step, task.params.half_backlash, task.params.stiction, width, scheduled,
-            ],
-            dtype=np.float64,
-        )  # fmt: skip
+        self.config = engine_step.batch_config(
+            scale=task.action_scale,
+            s0=task.noise_scale[0],
+            s1=task.noise_scale[1],
+            dt=task.dt,
+            limit=task.integral_limit,
+            error_weight=task.error_weight,
+            rate_weight=task.rate_weight,
+            envelope=task.envelope,
+            cost_bound=task.step_cost_bound,
+            horizon=task.horizon,
+            fault_kind=_FAULT_CODES[None if fault is None else fault.kind],
+            fault_index=0 if fault is None else fault.index,
+            magnitude=0.0 if fault is None else fault.magnitude,
+            fault_step=task.fault_step,
+            half=task.params.half_backlash,
+            stick=task.params.stiction,
+            width=width,
+            scheduled=scheduled,
+        )
         self.table = table
         offsets = np.zeros((0, 2)) if task.offset_table is None else task.offset_table
         self.offsets = np.ascontiguousarray(offsets, dtype=np.float64)
@@ -48,8 +58,8 @@ class BatchArgs:
 
 def batch_args(task: EngineTask, table: bytes, width: int, scheduled: bool) -> BatchArgs | None:
     """The task's :class:`BatchArgs`, or None where the batch step stays numpy's: no kernel
-    built, or the nonlinear engine as the plant."""
-    if engine_step._KERNEL is None or task.nonlinear is not None:
+    built (or one without the batch forms), or the nonlinear engine as the plant."""
+    if not engine_step.has_batch(engine_step._KERNEL) or task.nonlinear is not None:
         return None
     return BatchArgs(task, table, width, scheduled)
 
@@ -58,7 +68,8 @@ def plant_step(task: EngineTask, plant: EnginePlant, command: np.ndarray, t: np.
     """The task's plant on arrays under the commands (2, N) of step t - 1 -> t, stepped in place
     (the arrays of ``plant``, returned)."""
     args: BatchArgs = task.batch_args
-    engine_step._KERNEL.plant_batch(*plant, np.ascontiguousarray(command), t, args.config, args.table, args.offsets)
+    command = np.ascontiguousarray(command)
+    engine_step._KERNEL.plant_batch(*plant, command, t, args.config, args.table, args.offsets)
     return plant
 
 
@@ -66,9 +77,9 @@ def task_step(
     task: EngineTask, state: EngineState, action: np.ndarray, t: np.ndarray, ref: Any, noise: Any
 ) -> tuple[tuple, np.ndarray, np.ndarray, np.ndarray]:
     """:meth:`EngineTask.step` on arrays, the state's arrays stepped in place: (plant, integral,
-    prev, held) (prev the rows of ``action``), the observation values (10, N) float64 (a buffer
-    of the task's that its next step overwrites: read before), reward, terminated. ``action``
-    (2, N) float64, ``noise`` rows float32."""
+    prev, held) (prev the rows of ``action``), the observation values (10, N) rounded to float32
+    (a fresh table, which the vector env hands out), reward, terminated. ``action`` (2, N)
+    float64, ``noise`` rows float32."""
     plant, integral, prev, held = state
     n = len(t)
     args: BatchArgs = task.batch_args

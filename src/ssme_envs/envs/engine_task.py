@@ -187,23 +187,10 @@ class EngineTask:
             object.__setattr__(self, "advance", self.nonlinear.advance)
             object.__setattr__(self, "initial_plant", self.nonlinear.initial_plant)
         k_rows, b_rows, lam = self.params.floats()
-        object.__setattr__(
-            self,
-            "rows",
-            (
-                pair_rows(self.params.shift_source, k_rows, b_rows),
-                *lam,
-                self.params.half_backlash,
-                self.params.stiction,
-            ),
-        )
-        if engine_step._KERNEL is None:
-            object.__setattr__(self, "kernel_args", None)
-        else:
-            object.__setattr__(
-                self, "kernel_args", (0.0, 0.0, *self.rows[3:], *pair_table([(lam, self.rows[0])]))
-            )
-        table = None if self.kernel_args is None else self.kernel_args[-2:]
+        pairs = pair_rows(self.params.shift_source, k_rows, b_rows)
+        object.__setattr__(self, "rows", (pairs, *lam, self.params.half_backlash, self.params.stiction))
+        table = None if engine_step._KERNEL is None else pair_table([(lam, pairs)])
+        object.__setattr__(self, "kernel_args", None if table is None else (0.0, 0.0, *self.rows[3:], *table))
         object.__setattr__(self, "noise_scale", tuple(self.noise_std.tolist()))
         object.__setattr__(self, "noise_scale_arrays", tuple(np.full(1, s) for s in self.noise_scale))
         offsets = None if self.offset_table is None else Schedule.of(self.offset_table)
@@ -308,11 +295,13 @@ class EngineTask:
         self, plant: EnginePlant, command: Any, t: Any, nominal: Any, ops: Carrier
     ) -> tuple[EnginePlant, Value, Value]:
         """:meth:`plant_step` on the commands of both valves: a (2, N) array, or two floats."""
-        if ops.batched:
-            if self.batch_args is not None:
-                x, linkage, valve = engine_compiled.plant_step(self, plant, command, t)  # in place
-            else:
-                x, linkage, valve = step_arrays(*plant, command, self.params)
+        if ops.batched:  # compiled: stepped in place
+            compiled = self.batch_args is not None
+            x, linkage, valve = (
+                engine_compiled.plant_step(self, plant, command, t)
+                if compiled
+                else step_arrays(*plant, command, self.params)
+            )
             return EnginePlant(x, linkage, valve), x[-2], x[-1]
         x, linkage, valve = plant
         if self.kernel_args is not None:  # the reference's operations, compiled

@@ -241,9 +241,62 @@ def pair_step_reference(
     return dynamics(x, u0, u1, rows), linkage, (v0, v1)
 
 
+# The batch kernels (plant_batch, task_batch: N engines state-major, stepped in place) take the
+# task's numbers as one float64 array, these entries in this order (_engine_kernel.c's enum).
+BATCH_CONFIG = (
+    "scale", "s0", "s1", "dt", "limit", "error_weight", "rate_weight", "envelope", "cost_bound", "horizon",
+    "fault_kind", "fault_index", "magnitude", "fault_step", "half", "stick", "width", "scheduled",
+)  # fmt: skip
+
+
+def has_batch(kernel: Any) -> bool:
+    """Whether a kernel has the batch forms (a build without them steps batches with numpy)."""
+    return hasattr(kernel, "plant_batch") and hasattr(kernel, "task_batch")
+
+
+def batch_config(**entries: float) -> np.ndarray:
+    """The batch kernels' config from its named entries (:data:`BATCH_CONFIG`; those not given
+    are 0)."""
+    unknown = sorted(set(entries) - set(BATCH_CONFIG))
+    if unknown:
+        raise ValueError(f"unknown batch config entries {unknown}")
+    return np.array([float(entries.get(name, 0.0)) for name in BATCH_CONFIG])
+
+
+def _batch_agrees(kernel: Any, x: list, lam: tuple, rows: tuple, table: bytes, width: int, k: int,
+                  commands: list, half: float, stick: float) -> bool:  # fmt: skip
+    """Whether ``plant_batch`` on the envs of ``commands`` (state ``x`` each, step 1 of the table,
+    the gains about step 1's nominal valves) and ``task_batch``'s plant give the reference's bits."""
+    n = len(commands)
+    nominal = (0.1 * k, -0.2 * k)
+    config = batch_config(half=half, stick=stick, width=width, scheduled=1, scale=1.0)
+    offsets = np.array([[0.0, 0.0], nominal])
+    x_rows = np.array([x] * n).T.copy()
+    linkage, valve = np.array([[0.01] * n, [-0.0] * n]), np.array([[-0.02] * n, [0.004] * n])
+    command, t = np.array(commands).T.copy(), np.full(n, 2, dtype=np.int64)
+    plant = (x_rows.copy(), linkage.copy(), valve.copy())
+    kernel.plant_batch(*plant, command, t, config, table, offsets)
+    # task_batch's plant, its commands the nominal valves plus these actions (scale 1)
+    task_x, task_link, task_valve = x_rows.copy(), linkage.copy(), valve.copy()
+    zeros, floats = np.zeros(n), np.zeros(n, dtype=np.float32)
+    kernel.task_batch(task_x, task_link, task_valve, zeros.copy(), zeros.copy(), zeros.copy(), zeros, zeros,
+                      command, t, zeros, zeros, floats, floats, np.empty((10, n), dtype=np.float32),
+                      np.empty(n), np.empty(n, dtype=bool), config, table, offsets)  # fmt: skip
+    fixed = (x, (0.01, -0.0), (-0.02, 0.004))
+    for j, (c0, c1) in enumerate(commands):
+        want = pair_step_reference(*fixed, c0, c1, *nominal, half, stick, lam, rows)
+        got = (plant[0][:, j].tolist(), tuple(plant[1][:, j].tolist()), tuple(plant[2][:, j].tolist()))
+        moved = (nominal[0] + c0, nominal[1] + c1)
+        task_want = pair_step_reference(*fixed, *moved, *nominal, half, stick, lam, rows)
+        task_got = (task_x[:, j].tolist(), tuple(task_link[:, j].tolist()), tuple(task_valve[:, j].tolist()))
+        if not (_same_bits(got, want) and _same_bits(task_got, task_want)):
+            return False
+    return True
+
+
 def _kernel_agrees(kernel: Any) -> bool:
-    """Whether ``kernel.pair_step`` gives :func:`pair_step_reference`'s bits on a check set: both
-    widths, backlash and stiction on and off, signed zeros, NaN and inf."""
+    """Whether ``kernel.pair_step`` and its batch forms give :func:`pair_step_reference`'s bits
+    on a check set: both widths, backlash and stiction on and off, signed zeros, NaN and inf."""
     special = [0.0, -0.0, 1e-300, -3.5e-3, 0.02, math.inf, math.nan]
     states = [[0.3, -0.0, 1.5e-3, -0.7], [math.nan, 2.0, -0.0, 1e300], [0.0, 0.0, -2.5e-3, 0.011]]
     rows = ((-1, 0.31, -0.2, 0.05, 1e-3), (0, -0.4, 0.9, -0.0, 0.2), (-1, 1.7, 0.25, 0.3, -0.6),
@@ -259,6 +312,10 @@ def _kernel_agrees(kernel: Any) -> bool:
                     got = kernel.pair_step(*args, table, width, 1)
                     want = pair_step_reference(*args, lam, table_rows)
                     if not _same_bits(got, want):
+                        return False
+                    commands = list(zip(special, special[::-1]))
+                    batch = (x, lam, table_rows, table, width, k, commands, half, stick)
+                    if has_batch(kernel) and not _batch_agrees(kernel, *batch):
                         return False
     return True
 
