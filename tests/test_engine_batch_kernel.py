@@ -100,8 +100,8 @@ def test_the_compiled_batch_step_gives_every_env_the_float_steps_bits(
     start = rng.integers(1, task.horizon + 1)
     t = np.full(n, start) if synced else rng.integers(1, task.horizon + 1, n)
     if task.fault_step >= 0 and not synced:  # the steps about the fault's start
-        for j, at in zip(rng.integers(0, n, 3), (task.fault_step, task.fault_step + 1, task.fault_step + 2)):
-            t[j] = min(max(at, 1), task.horizon)
+        for j, shift in zip(rng.integers(0, n, 3), range(3), strict=True):
+            t[j] = min(max(task.fault_step + shift, 1), task.horizon)
     elif task.fault_step >= 0 and rng.random() < 0.5:
         t[:] = min(max(task.fault_step + rng.integers(0, 3), 1), task.horizon)
     action = rng.uniform(-1.0, 1.0, (2, n))
@@ -142,15 +142,25 @@ def _call(task: EngineTask, n: int, **change) -> tuple:
     """A valid task_batch call on ``n`` envs, with arguments replaced by ``change``; the state
     arrays in it, to see that a refused call leaves them."""
     args = task.batch_args
-    names = ("x", "linkage", "valve", "integral0", "integral1", "held", "prev0", "prev1", "action", "t",
-             "r0", "r1", "z0", "z1", "values", "reward", "terminated", "config", "table", "offsets")  # fmt: skip
-    values = dict(
-        zip(names[:10], (np.zeros((task.n_states, n)), np.zeros((2, n)), np.zeros((2, n)), *np.zeros((5, n)),
-                         np.zeros((2, n)), np.ones(n, dtype=np.int64))),  # fmt: skip
-        r0=np.zeros(n), r1=np.zeros(1), z0=np.zeros(n, np.float32), z1=np.zeros(n, np.float32),
-        values=np.empty((10, n), np.float32), reward=np.empty(n), terminated=np.empty(n, bool),
-        config=args.config, table=args.table, offsets=args.offsets,
+    names = (
+        "x", "linkage", "valve", "integral0", "integral1", "held", "prev0", "prev1", "action", "t",
+        "r0", "r1", "z0", "z1", "values", "reward", "terminated", "config", "table", "offsets",
     )  # fmt: skip
+    state = (np.zeros((task.n_states, n)), np.zeros((2, n)), np.zeros((2, n)), *np.zeros((5, n)))
+    values = dict(zip(names[:9], (*state, np.zeros((2, n))), strict=True))
+    values.update(
+        t=np.ones(n, dtype=np.int64),
+        r0=np.zeros(n),
+        r1=np.zeros(1),
+        z0=np.zeros(n, np.float32),
+        z1=np.zeros(n, np.float32),
+        values=np.empty((10, n), np.float32),
+        reward=np.empty(n),
+        terminated=np.empty(n, bool),
+        config=args.config,
+        table=args.table,
+        offsets=args.offsets,
+    )
     values.update(change)
     return tuple(values[name] for name in names)
 
