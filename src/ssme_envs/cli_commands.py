@@ -68,9 +68,10 @@ def bench_command(args: argparse.Namespace) -> int:
     from ssme_envs.models import engine_step, nozzle_joint
 
     ran = {"compiled": "compiled kernel", "python": "Python reference"}
+    batch = "compiled kernel" if engine_step.has_batch(engine_step._KERNEL) else "numpy reference"
     joint = (
         f"The nozzle joint ran its {ran[nozzle_joint.KERNEL]}, "
-        f"the engine's float step its {ran[engine_step.KERNEL]}."
+        f"the engine's float step its {ran[engine_step.KERNEL]}, its batch step its {batch}."
     )
     print(joint)
     if args.out is not None:
