@@ -18,9 +18,6 @@ from ssme_envs.models import engine_step
 if TYPE_CHECKING:
     from ssme_envs.envs.engine_task import EnginePlant, EngineState, EngineTask
 
-# the kernel's fault codes (task_batch's NO_FAULT, STUCK_VALVE, GAIN_LOSS, SENSOR_BIAS)
-_FAULT_CODES = {None: 0, "stuck_valve": 1, "gain_loss": 2, "sensor_bias": 3}
-
 
 class BatchArgs:
     """What the kernel needs of a task beside its state: its numbers as the kernel's config
@@ -42,7 +39,7 @@ class BatchArgs:
             envelope=task.envelope,
             cost_bound=task.step_cost_bound,
             horizon=task.horizon,
-            fault_kind=_FAULT_CODES[None if fault is None else fault.kind],
+            fault_kind=engine_step.FAULT_CODES[None if fault is None else fault.kind],
             fault_index=0 if fault is None else fault.index,
             magnitude=0.0 if fault is None else fault.magnitude,
             fault_step=task.fault_step,

@@ -295,14 +295,12 @@ class EngineTask:
         self, plant: EnginePlant, command: Any, t: Any, nominal: Any, ops: Carrier
     ) -> tuple[EnginePlant, Value, Value]:
         """:meth:`plant_step` on the commands of both valves: a (2, N) array, or two floats."""
-        if ops.batched:  # compiled: stepped in place
-            compiled = self.batch_args is not None
-            x, linkage, valve = (
-                engine_compiled.plant_step(self, plant, command, t)
-                if compiled
-                else step_arrays(*plant, command, self.params)
-            )
-            return EnginePlant(x, linkage, valve), x[-2], x[-1]
+        if ops.batched:
+            if self.batch_args is not None:  # compiled, stepped in place
+                plant = engine_compiled.plant_step(self, plant, command, t)
+            else:
+                plant = EnginePlant(*step_arrays(*plant, command, self.params))
+            return plant, plant.x[-2], plant.x[-1]
         x, linkage, valve = plant
         if self.kernel_args is not None:  # the reference's operations, compiled
             kernel = engine_step._KERNEL

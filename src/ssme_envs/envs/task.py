@@ -119,7 +119,8 @@ class TrackingTask(Protocol):
     (state, observation values in the layout's order, reward, terminated). A task whose
     class sets ``scales_float32_noise = True`` gets the rows of noise float32, as drawn, and
     promises to scale them into float64 (the exact upcast's products), saving the vector env a
-    conversion pass per step.
+    conversion pass per step. A batched step may return its observation values as a fresh
+    float32 (columns, N) array, already rounded: the vector env hands that table out as it is.
     """
 
     observation: Observation

@@ -416,11 +416,30 @@ static void errors(Py_ssize_t b, const double *restrict ref0, const double *rest
     }
 }
 
+/* a batch call's steps t (N,), states x (n, N, written in place) and config, checked: -1 with
+ * an error otherwise */
+static int batch_head(Views *v, PyObject *t_obj, PyObject *x_obj, PyObject *config_obj, const char *name,
+                      const long long **t, double **x, const double **config, Py_ssize_t *N, Py_ssize_t *n)
+{
+    Py_ssize_t nN;
+    *t = take(v, t_obj, 8, "lq", -1, 0, "t", N);
+    *x = *t ? take(v, x_obj, 8, "d", -1, 1, "x", &nN) : NULL;
+    *config = *x ? take(v, config_obj, 8, "d", CONFIG_SIZE, 0, "config", NULL) : NULL;
+    if (*config == NULL)
+        return -1;
+    if (*N < 1 || nN % *N != 0) {
+        PyErr_Format(PyExc_ValueError, "%s: x of (n, N), t of (N,)", name);
+        return -1;
+    }
+    *n = nN / *N;
+    return 0;
+}
+
 /* plant_batch(x, linkage, valve, command, t, config, table, offsets) -> None
  *
  * N engines' valves and dynamics under the commands (2, N) of step t - 1 -> t, in place: the
- * task's advance on arrays. config: engine_task's float64 config (half, stick, width and
- * scheduled are read); offsets: the nominal valves per step ((T + 1, 2); the gains act about
+ * task's advance on arrays. config: the float64 config of engine_step.BATCH_CONFIG (half,
+ * stick, width and scheduled are read); offsets: the nominal valves per step ((T + 1, 2); the gains act about
  * row t - 1 when scheduled). */
 static PyObject *plant_batch(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
@@ -432,20 +451,16 @@ static PyObject *plant_batch(PyObject *self, PyObject *const *args, Py_ssize_t n
     Plant p;
     PyObject *result = NULL;
     double *scratch = NULL;
-    Py_ssize_t N, nN;
-    const long long *t = take(&v, args[4], 8, "lq", -1, 0, "t", &N);
-    double *x = t ? take(&v, args[0], 8, "d", -1, 1, "x", &nN) : NULL;
-    const double *config = x ? take(&v, args[5], 8, "d", CONFIG_SIZE, 0, "config", NULL) : NULL;
-    if (config == NULL)
+    Py_ssize_t N, n;
+    const long long *t;
+    double *x;
+    const double *config;
+    if (batch_head(&v, args[4], args[0], args[5], "plant_batch", &t, &x, &config, &N, &n) < 0)
         goto done;
-    if (N < 1 || nN % N != 0) {
-        PyErr_SetString(PyExc_ValueError, "plant_batch: x of (n, N), t of (N,)");
-        goto done;
-    }
     double *linkage = take(&v, args[1], 8, "d", 2 * N, 1, "linkage", NULL);
     double *valve = linkage ? take(&v, args[2], 8, "d", 2 * N, 1, "valve", NULL) : NULL;
     const double *command = valve ? take(&v, args[3], 8, "d", 2 * N, 0, "command", NULL) : NULL;
-    if (command == NULL || plant_of(&p, &v, args[6], args[7], config, nN / N, t, N) < 0)
+    if (command == NULL || plant_of(&p, &v, args[6], args[7], config, n, t, N) < 0)
         goto done;
     if ((scratch = PyMem_Malloc((size_t)p.n * CHUNK * sizeof(double))) == NULL) {
         PyErr_NoMemory();
@@ -486,16 +501,12 @@ static PyObject *task_batch(PyObject *self, PyObject *const *args, Py_ssize_t na
     Plant p;
     PyObject *result = NULL;
     double *scratch = NULL;
-    Py_ssize_t N, nN, nr0, nr1;
-    const long long *t = take(&v, args[9], 8, "lq", -1, 0, "t", &N);
-    double *x = t ? take(&v, args[0], 8, "d", -1, 1, "x", &nN) : NULL;
-    const double *config = x ? take(&v, args[17], 8, "d", CONFIG_SIZE, 0, "config", NULL) : NULL;
-    if (config == NULL)
+    Py_ssize_t N, n, nr0, nr1;
+    const long long *t;
+    double *x;
+    const double *config;
+    if (batch_head(&v, args[9], args[0], args[17], "task_batch", &t, &x, &config, &N, &n) < 0)
         goto done;
-    if (N < 1 || nN % N != 0) {
-        PyErr_SetString(PyExc_ValueError, "task_batch: x of (n, N), t of (N,)");
-        goto done;
-    }
     double *io[5];
     const char *io_names[5] = {"linkage", "valve", "integral0", "integral1", "held"};
     Py_ssize_t io_counts[5] = {2 * N, 2 * N, N, N, N};
@@ -512,7 +523,7 @@ static PyObject *task_batch(PyObject *self, PyObject *const *args, Py_ssize_t na
     float *values = z1 ? take(&v, args[14], 4, "f", 10 * N, 1, "values", NULL) : NULL;
     double *reward = values ? take(&v, args[15], 8, "d", N, 1, "reward", NULL) : NULL;
     char *terminated = reward ? take(&v, args[16], 1, "?", N, 1, "terminated", NULL) : NULL;
-    if (terminated == NULL || plant_of(&p, &v, args[18], args[19], config, nN / N, t, N) < 0)
+    if (terminated == NULL || plant_of(&p, &v, args[18], args[19], config, n, t, N) < 0)
         goto done;
     if ((nr0 != N && nr0 != 1) || (nr1 != N && nr1 != 1)) {
         PyErr_SetString(PyExc_ValueError, "task_batch: references of N envs or one for all");
@@ -523,7 +534,6 @@ static PyObject *task_batch(PyObject *self, PyObject *const *args, Py_ssize_t na
         goto done;
     }
     double *linkage = io[0], *valve = io[1], *integral0 = io[2], *integral1 = io[3], *held = io[4];
-    const Py_ssize_t n = p.n;
     const double s0 = config[S0], s1 = config[S1], dt = config[DT], lim = config[LIMIT];
     const double ew = config[ERROR_WEIGHT], rw = config[RATE_WEIGHT], envelope = config[ENVELOPE];
     const double magnitude = config[MAGNITUDE], cost = config[COST_BOUND];

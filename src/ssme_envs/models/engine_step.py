@@ -249,6 +249,10 @@ BATCH_CONFIG = (
 )  # fmt: skip
 
 
+# the batch kernels' fault codes (its fault_kind entry; _engine_kernel.c's enum)
+FAULT_CODES = {None: 0, "stuck_valve": 1, "gain_loss": 2, "sensor_bias": 3}
+
+
 def has_batch(kernel: Any) -> bool:
     """Whether a kernel has the batch forms (a build without them steps batches with numpy)."""
     return hasattr(kernel, "plant_batch") and hasattr(kernel, "task_batch")
@@ -313,10 +317,11 @@ def _kernel_agrees(kernel: Any) -> bool:
                     want = pair_step_reference(*args, lam, table_rows)
                     if not _same_bits(got, want):
                         return False
-                    commands = list(zip(special, special[::-1]))
-                    batch = (x, lam, table_rows, table, width, k, commands, half, stick)
-                    if has_batch(kernel) and not _batch_agrees(kernel, *batch):
-                        return False
+            commands = list(zip(special, special[::-1]))  # every pair above, one env each
+            for half, stick in ((0.0, 0.0), (1e-3, 0.0), (0.0, 2e-3), (1e-3, 2e-3)):
+                batch = (x, lam, table_rows, table, width, k, commands, half, stick)
+                if has_batch(kernel) and not _batch_agrees(kernel, *batch):
+                    return False
     return True
 
 
