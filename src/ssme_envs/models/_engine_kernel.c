@@ -439,8 +439,8 @@ static int batch_head(Views *v, PyObject *t_obj, PyObject *x_obj, PyObject *conf
  *
  * N engines' valves and dynamics under the commands (2, N) of step t - 1 -> t, in place: the
  * task's advance on arrays. config: the float64 config of engine_step.BATCH_CONFIG (half,
- * stick, width and scheduled are read); offsets: the nominal valves per step ((T + 1, 2); the gains act about
- * row t - 1 when scheduled). */
+ * stick, width and scheduled are read); offsets: the nominal valves per step ((T + 1, 2); the
+ * gains act about row t - 1 when scheduled). */
 static PyObject *plant_batch(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
     if (nargs != 8) {
