@@ -1,6 +1,7 @@
-"""The compiled kernels, optional: the nozzle joint's RK4 and the engine's float step. Without a C
-compiler the package installs and runs on their Python references, which give the same bits
-(ssme_envs.models.nozzle_joint, ssme_envs.models.engine_step)."""
+"""The compiled kernels, optional: the nozzle joint's RK4, the engine's step and the vector envs'
+episode draws. Without a C compiler the package installs and runs on their references, which
+give the same bits (ssme_envs.models.nozzle_joint, ssme_envs.models.engine_step, numpy's
+generators in ssme_envs.envs.episode_draws)."""
 
 from setuptools import Extension, setup
 from setuptools.command.build_ext import build_ext
@@ -23,7 +24,7 @@ class BuildExt(build_ext):
 setup(
     ext_modules=[
         Extension(f"ssme_envs.models.{name}", [f"src/ssme_envs/models/{name}.c"], optional=True)
-        for name in ("_joint_kernel", "_engine_kernel")
+        for name in ("_joint_kernel", "_engine_kernel", "_draw_kernel")
     ],
     cmdclass={"build_ext": BuildExt},
 )

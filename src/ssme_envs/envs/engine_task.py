@@ -24,6 +24,7 @@ from ssme_envs.envs.task import (
     Carrier,
     Observation,
     Schedule,
+    Uniforms,
     Value,
     check_number,
     check_numbers,
@@ -243,7 +244,7 @@ class EngineTask:
         """Uniform float32 numbers one episode consumes: sensor noise, then the reference's."""
         return 2 * (self.horizon + 1) + uniforms_needed(self.reference, self.horizon + 1, 2, self.dt)
 
-    def episodes(self, uniforms: np.ndarray, start: int, stop: int) -> tuple[np.ndarray, np.ndarray]:
+    def episodes(self, uniforms: Uniforms, start: int, stop: int) -> tuple[np.ndarray, np.ndarray]:
         """The steps [start, stop) of k episodes from their uniform draws, float32 (draw_size, k),
         episode axis last: references (2, stop - start, k) float64 and unit sensor noise (2,
         stop - start, k) float32, scaled by ``noise_std`` at each step. One float32 call to the

@@ -13,7 +13,16 @@ import numpy as np
 
 from ssme_envs.envs.plant_spread import PlantSpread, covered_joints, resolve_spread
 from ssme_envs.envs.references import Fault, check_reference, normal_rows, reference_signals, uniforms_needed
-from ssme_envs.envs.task import MAX_EPISODE_SECONDS, SYNCED, Carrier, Observation, Value, check_number, shown
+from ssme_envs.envs.task import (
+    MAX_EPISODE_SECONDS,
+    SYNCED,
+    Carrier,
+    Observation,
+    Uniforms,
+    Value,
+    check_number,
+    shown,
+)
 from ssme_envs.models.nozzle import (
     DEFAULT_TORQUE_LIMIT,
     MAX_SUBSTEPS,
@@ -255,7 +264,7 @@ class NozzleTask:
             length + length % 2 + uniforms_needed(self.reference, length, 1, self.dt) + self.plant_draw_size
         )
 
-    def episodes(self, uniforms: np.ndarray, start: int, stop: int) -> tuple[np.ndarray, np.ndarray]:
+    def episodes(self, uniforms: Uniforms, start: int, stop: int) -> tuple[np.ndarray, np.ndarray]:
         """The steps [start, stop) of k episodes from their uniforms (draw_size, k) float32, as
         for the engine tasks: references (1, stop - start, k) in rad and unit noise (1, stop -
         start, k) float32, row s of the Box-Muller normals of the first draws."""

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from ssme_envs.envs.task import MAX_EPISODE_SECONDS, real_number, shown
+from ssme_envs.envs.task import MAX_EPISODE_SECONDS, Uniforms, real_number, shown
 
 REFERENCE_KINDS = ("random_steps", "step", "ramp", "prbs", "sine_sweep", "attitude", "zero", "mixed")
 # what a "mixed" episode draws from, with equal probability
@@ -247,7 +247,7 @@ def unit_normals(uniforms: np.ndarray) -> np.ndarray:
     return normal_rows(uniforms, uniforms.shape[0] // 2, 0, uniforms.shape[0])
 
 
-def normal_rows(uniforms: np.ndarray, half: int, start: int, stop: int) -> np.ndarray:
+def normal_rows(uniforms: Uniforms, half: int, start: int, stop: int) -> np.ndarray:
     """Rows [start, stop) of ``unit_normals(uniforms[: 2 half])``, (stop - start, ...) float32,
     from the uniforms they pair alone: row i < half is ``R(u_i) cos(2 pi u_half+i)``, row
     half + i is ``R(u_i) sin(2 pi u_half+i)``, ``R(u) = sqrt(-2 log(1 - u))``.
@@ -275,7 +275,7 @@ def normal_rows(uniforms: np.ndarray, half: int, start: int, stop: int) -> np.nd
     return out
 
 
-def normal_pairs(uniforms: np.ndarray, half: int, start: int, stop: int) -> np.ndarray:
+def normal_pairs(uniforms: Uniforms, half: int, start: int, stop: int) -> np.ndarray:
     """The cosine and sine normals of the pairs [start, stop): rows [start, stop) and [half +
     start, half + stop) of ``unit_normals(uniforms[: 2 half])`` (see :func:`normal_rows`), (2,
     stop - start, ...) float32, each pair's radius and angle computed once."""
@@ -290,9 +290,7 @@ def _overlap(parts: list) -> bool:
     return len(parts) == 2 and parts[0][1] < parts[1][2] and parts[1][1] < parts[0][2]
 
 
-def _radius_and_angle(
-    uniforms: np.ndarray, half: int, start: int, stop: int
-) -> tuple[np.ndarray, np.ndarray]:
+def _radius_and_angle(uniforms: Uniforms, half: int, start: int, stop: int) -> tuple[np.ndarray, np.ndarray]:
     """``R(u_i)`` and ``2 pi u_half+i`` for the pairs i in [start, stop), float32."""
     radius = np.log1p(-np.ascontiguousarray(uniforms[start:stop], dtype=np.float32))  # 1 - u in (0, 1]
     radius *= -2.0

@@ -93,13 +93,13 @@ class SubEnv:
 
     @property
     def np_random(self) -> np.random.Generator:
-        return self._venv._rngs[self._index]
+        return self._venv._draws.generators[self._index]
 
     @np_random.setter
     def np_random(self, value: np.random.Generator) -> None:
         if not isinstance(value, np.random.Generator):  # else the next reset fails, far from here
             raise TypeError(f"np_random must be a numpy Generator, got {type(value).__name__}")
-        self._venv._rngs[self._index] = value
+        self._venv._draws.set_generator(self._index, value)
         self._venv._seeds[self._index] = -1
 
     @property

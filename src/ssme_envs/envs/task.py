@@ -102,6 +102,17 @@ SYNCED = Carrier(
 GATHER = Carrier(batched=True, where=np.where, clip=_ARRAY_CLIP, at=_rows_gathered, any=_ARRAY_ANY)
 
 
+class Uniforms(Protocol):
+    """An episode draw as the tasks read it: (draw_size, k) float32 numbers, k episodes, read in
+    row slices (``uniforms[lo:hi]``, an array). A numpy array is one; the vector env hands out
+    :class:`~ssme_envs.envs.episode_draws.EpisodeUniforms`, which makes a slice when it is read."""
+
+    @property
+    def shape(self) -> tuple[int, ...]: ...
+
+    def __getitem__(self, rows: slice) -> np.ndarray: ...
+
+
 @runtime_checkable
 class TrackingTask(Protocol):
     """What the scalar env (:class:`~ssme_envs.envs.tracking_env.TrackingEnv`) and the vector env
@@ -110,7 +121,8 @@ class TrackingTask(Protocol):
     Episodes are drawn from ``draw_size`` uniform float32 numbers per episode (one generator call
     at reset), the last ``plant_draw_size`` of which (0: none) draw the episode's plant:
     ``initial_state(n, plants)`` gets them (plant_draw_size, n) and puts the drawn plant in the
-    state. ``episodes(uniforms, start, stop)`` turns them (draw_size, k) into the references
+    state. ``episodes(uniforms, start, stop)`` turns them (draw_size, k, :class:`Uniforms`: read in
+    row slices) into the references
     and unit sensor noise of steps [start, stop), (channels, stop - start, k) each, equal to the
     same steps of the whole episode. The envs ask for the steps as episodes reach them
     (:func:`next_stop`), so that a reset costs the same whatever the episode's length.
@@ -139,7 +151,7 @@ class TrackingTask(Protocol):
     @property
     def shared_references(self) -> np.ndarray | None: ...
 
-    def episodes(self, uniforms: np.ndarray, start: int, stop: int) -> tuple[np.ndarray, np.ndarray]: ...
+    def episodes(self, uniforms: Uniforms, start: int, stop: int) -> tuple[np.ndarray, np.ndarray]: ...
 
     def initial_state(self, n: int | None = None, plants: np.ndarray | None = None) -> tuple: ...
 
@@ -173,16 +185,6 @@ def set_columns(state: Any, fresh: Any, envs: np.ndarray) -> None:
             set_columns(block, new, envs)
         elif isinstance(block, np.ndarray):
             block[..., envs] = new
-
-
-def adopt(table: np.ndarray, whole: np.ndarray) -> np.ndarray:
-    """``whole`` as the new ``table`` when it is a fresh array of the table's shape and dtype
-    (nothing else holds it), else ``table`` with ``whole`` copied in."""
-    fresh = whole.base is None and whole.flags.c_contiguous and whole.flags.writeable
-    if fresh and whole.shape == table.shape and whole.dtype == table.dtype:
-        return whole
-    table[...] = whole
-    return table
 
 
 def transpose_into(table: np.ndarray, out: np.ndarray, tile: int = 256) -> np.ndarray:
@@ -248,7 +250,7 @@ __all__ = [
     "Observation",
     "Schedule",
     "TrackingTask",
-    "adopt",
+    "Uniforms",
     "check_number",
     "check_numbers",
     "next_stop",

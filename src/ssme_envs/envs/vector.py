@@ -25,11 +25,12 @@ from gymnasium.vector.utils import batch_space
 
 from ssme_envs.envs.engine_task import EngineTask
 from ssme_envs.envs.engine_throttle import ThrottleTask
+from ssme_envs.envs.episode_draws import EpisodeDraws
 from ssme_envs.envs.inputs import batch_actions, check_seeds, check_vector_memory, positive_int
 from ssme_envs.envs.launcher_pitch import LauncherTask
 from ssme_envs.envs.nozzle_task import NozzleTask
 from ssme_envs.envs.sub_env import SubEnv, reset_mask, sub_env_index
-from ssme_envs.envs.task import CLIP_UFUNC, GATHER, SYNCED, adopt, next_stop, set_columns, transpose_into
+from ssme_envs.envs.task import CLIP_UFUNC, GATHER, SYNCED, next_stop, set_columns
 from ssme_envs.envs.tracking_env import EpisodeOverError
 
 _FLOATS = (np.dtype(np.float32), np.dtype(np.float64))  # action dtypes clipped without a copy
@@ -113,23 +114,18 @@ class TrackingVectorEnv(VectorEnv):
         # whether the task ends episodes whose step went non-finite (None: it passes them on)
         self._ends_nonfinite = self.task.nonfinite_reward(np.zeros(1, dtype=np.int64)) is not None
         n, length, channels = num_envs, self.task.horizon + 1, self.task.n_channels
-        self._rngs: list[np.random.Generator] = []
-        self._seeds: list[int] = []  # np_random_seed of each sub-env (-1: generator set directly)
-        for _ in range(n):
-            rng, seed = seeding.np_random(None)
-            self._rngs.append(rng)
-            self._seeds.append(seed)
+        rngs, seeds = zip(*(seeding.np_random(None) for _ in range(n)), strict=True)
+        self._seeds: list[int] = list(seeds)  # np_random_seed of each sub-env (-1: generator set directly)
+        # each sub-env's episode draw, made as its episode reaches it (``episode_draws``)
+        self._draws = EpisodeDraws(self.task.draw_size, rngs)
         # Episode data with the env axis last: one step's values of every env are contiguous.
         # References common to every episode (the throttle profile) are not stored per env.
         shared = self.task.shared_references
         self._shared_refs = None if shared is None else np.ascontiguousarray(shared.T)  # (channels, T + 1)
         self._refs = None if shared is not None else np.zeros((channels, length, n))
         self._noise = np.zeros((channels, length, n), dtype=np.float32)  # unit draws, scaled at each step
-        # Each sub-env's episode draws, a row each (its generator fills it in place), and how many
-        # of its steps are computed into the tables: they are as the episode reaches them.
-        self._draws = np.empty((n, self.task.draw_size), dtype=np.float32)
-        self._draw_rows = list(self._draws)  # views made once: a reset draws into them by the thousand
-        self._uniforms = np.empty((self.task.draw_size, n), dtype=np.float32)  # _draws transposed
+        # how many of each episode's steps are computed into the tables: they are as the episode
+        # reaches them
         self._ready = np.zeros(n, dtype=np.int64)
         self._t = np.zeros(n, dtype=np.int64)
         # bounds that spare most steps the (N,) comparison of t with _ready: no step reaches an
@@ -148,7 +144,7 @@ class TrackingVectorEnv(VectorEnv):
     @property
     def np_random(self) -> tuple[np.random.Generator, ...]:
         """The generators of the sub-envs (a tuple, as ``SyncVectorEnv``'s)."""
-        return tuple(self._rngs)
+        return tuple(self._draws.generators)
 
     @property
     def np_random_seed(self) -> tuple[int, ...]:
@@ -173,11 +169,9 @@ class TrackingVectorEnv(VectorEnv):
     def _restart(self, envs: np.ndarray) -> np.ndarray:
         """Zero the state of the given envs and draw their next episodes; their first observations."""
         task, k = self.task, len(envs)
-        rngs, rows, single = self._rngs, self._draw_rows, np.float32
-        for i in envs.tolist():  # positional arguments: half the cost of the keywords per call
-            rngs[i].random(None, single, rows[i])
+        self._draws.start(envs)
         m = task.plant_draw_size  # the last uniforms of each draw: the episode's plant
-        plants = self._draws[envs, task.draw_size - m :].T if m else None
+        plants = self._draws.rows(envs, task.draw_size - m, task.draw_size) if m else None
         if k == self.num_envs:
             self._state = task.initial_state(k, plants)
         else:
@@ -203,19 +197,12 @@ class TrackingVectorEnv(VectorEnv):
         """The references and noise of the next block (:func:`next_stop`) of the episodes
         ``envs``, whose first ``start`` steps are computed, written into the tables; returned
         (channels, steps, len(envs))."""
-        every = len(envs) == self.num_envs
-        if every:  # every episode at once (a reset of all, synced episodes): the whole of them in
-            # one go, from a tiled transpose, as one pass costs less than several blocks'
-            stop = self.task.horizon + 1
-            uniforms = transpose_into(self._draws, self._uniforms)
-        else:
-            stop = next_stop(start, self.task.horizon + 1)
-            uniforms = np.take(self._draws, envs, axis=0).T
-        refs, noise = self.task.episodes(uniforms, start, stop)
-        if every:  # whole tables: adopted when fresh (a copy of tens of MB spared), else sliced in
-            self._noise = adopt(self._noise, noise)
+        stop = next_stop(start, self.task.horizon + 1)
+        refs, noise = self.task.episodes(self._draws.uniforms(envs), start, stop)
+        if len(envs) == self.num_envs:  # every episode (envs is then 0..N-1): slices
+            self._noise[:, start:stop] = noise
             if self._refs is not None:
-                self._refs = adopt(self._refs, refs)
+                self._refs[:, start:stop] = refs
         else:
             self._noise[:, start:stop, envs] = noise
             if self._refs is not None:
@@ -234,7 +221,8 @@ class TrackingVectorEnv(VectorEnv):
         envs = self._rows if mask is None or mask.all() else np.flatnonzero(mask)
         for i in envs:
             if seed[i] is not None:
-                self._rngs[i], self._seeds[i] = seeding.np_random(seed[i])
+                rng, self._seeds[i] = seeding.np_random(seed[i])
+                self._draws.set_generator(i, rng)
         self._autoreset[envs] = False
         self._obs[envs] = self._restart(envs)
         self._unstarted[envs] = False

@@ -1,0 +1,288 @@
+/* Episode draws from numpy's PCG64 generators, compiled: any uniform of an episode's draw, and
+ * the generator moved past the whole draw, without drawing what the episode never reaches.
+ *
+ * An env draws an episode as `rng.random(count, dtype=float32)`: `count` float32 numbers, each
+ * (u >> 8) / 2^24 of the generator's next 32-bit output u. PCG64 makes 64-bit outputs: a 128-bit
+ * LCG step s <- a s + inc, then the XSL-RR output of s; a 32-bit draw takes the low half of a new
+ * output and keeps the high half for the next one (has_uint32, uinteger). The LCG jumps n steps
+ * at once: s_n = a^n s + (a^(n-1) + ... + 1) inc, with a^n and the sum found in log2 n squarings.
+ *
+ * `start` records each env's generator state as its episode's origin and moves the generator to
+ * where drawing `count` numbers leaves it (buffer included). `rows` gives numbers [lo, hi) of the
+ * episodes from their origins. Together they give the bits of drawing the whole episode at once;
+ * the package checks that against numpy at import (ssme_envs.envs.episode_draws) and uses the
+ * kernel only where it holds. Where the compiler has no 128-bit integers the module has no
+ * functions and the package draws with numpy.
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#include <stdint.h>
+#include <string.h>
+
+#if defined(__SIZEOF_INT128__)
+
+typedef unsigned __int128 u128;
+
+/* numpy's PCG64 state where its compiler has 128-bit integers: numpy/random/src/pcg64 */
+typedef struct {
+    u128 state, inc;
+} Lcg;
+typedef struct {
+    Lcg *lcg;
+    int has_uint32;
+    uint32_t uinteger;
+} Pcg64;
+typedef struct {
+    void *state; /* numpy's bitgen_t begins with its state */
+} BitGen;
+
+#define MULTIPLIER (((u128)2549297995355413924ULL << 64) + 4865540595714422341ULL)
+
+enum { ORIGIN = 6, TILE = 16 }; /* an origin: state low, high; inc low, high; has_uint32; uinteger */
+
+/* the jump of n LCG steps: s_n = mult s + sum inc */
+static void jump_of(uint64_t n, u128 *mult, u128 *sum)
+{
+    u128 acc_mult = 1, acc_sum = 0, cur_mult = MULTIPLIER, cur_sum = 1;
+    while (n) {
+        if (n & 1) {
+            acc_mult *= cur_mult;
+            acc_sum = acc_sum * cur_mult + cur_sum;
+        }
+        cur_sum *= cur_mult + 1;
+        cur_mult *= cur_mult;
+        n >>= 1;
+    }
+    *mult = acc_mult;
+    *sum = acc_sum;
+}
+
+static inline uint64_t output(u128 s)
+{
+    uint64_t x = (uint64_t)(s >> 64) ^ (uint64_t)s;
+    unsigned r = (unsigned)(s >> 122);
+    return (x >> r) | (x << ((64u - r) & 63u));
+}
+
+static inline float uniform(uint32_t u) { return (float)(u >> 8) * (1.0f / 16777216.0f); }
+
+static inline u128 join(uint64_t lo, uint64_t hi) { return ((u128)hi << 64) | lo; }
+
+enum { MAX_VIEWS = 3 };
+typedef struct {
+    Py_buffer views[MAX_VIEWS];
+    int count;
+} Views;
+
+static void release(Views *v)
+{
+    for (int i = 0; i < v->count; i++)
+        PyBuffer_Release(&v->views[i]);
+    v->count = 0;
+}
+
+/* a C-contiguous buffer of items of `itemsize` bytes and one of the format codes `codes`, its
+ * item count into *items; NULL with an error otherwise */
+static void *take(Views *v, PyObject *obj, Py_ssize_t itemsize, const char *codes, int writable,
+                  const char *name, Py_ssize_t *items)
+{
+    Py_buffer *view = &v->views[v->count];
+    int flags = PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0);
+    if (v->count >= MAX_VIEWS || PyObject_GetBuffer(obj, view, flags) < 0)
+        return NULL;
+    v->count++;
+    const char *format = view->format == NULL ? "B" : view->format;
+    char code = format[0] == '<' || format[0] == '=' || format[0] == '@' ? format[1] : format[0];
+    if (view->itemsize != itemsize || code == '\0' || strchr(codes, code) == NULL) {
+        PyErr_Format(PyExc_ValueError, "%s: a C-contiguous array of type '%s' expected", name, codes);
+        return NULL;
+    }
+    *items = view->len / itemsize;
+    return view->buf;
+}
+
+/* the env indices, each checked within [0, n) */
+static const int64_t *env_indices(Views *v, PyObject *obj, Py_ssize_t n, Py_ssize_t *k)
+{
+    const int64_t *envs = take(v, obj, 8, "qlL", 0, "envs", k);
+    if (envs == NULL)
+        return NULL;
+    for (Py_ssize_t j = 0; j < *k; j++)
+        if (envs[j] < 0 || envs[j] >= n) {
+            PyErr_Format(PyExc_ValueError, "envs: index %lld outside 0..%zd", (long long)envs[j], n - 1);
+            return NULL;
+        }
+    return envs;
+}
+
+/* start(bitgens, envs, count, origins): for each env i of envs, origins[i] <- the state of the
+ * generator whose numpy capsule is bitgens[i], which then moves on as drawing `count` float32
+ * numbers moves it. Every argument is checked before a generator moves. */
+static PyObject *start(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (nargs != 4) {
+        PyErr_SetString(PyExc_TypeError, "start(bitgens, envs, count, origins)");
+        return NULL;
+    }
+    PyObject *bitgens = args[0];
+    long long count = PyLong_AsLongLong(args[2]);
+    if (count == -1 && PyErr_Occurred())
+        return NULL;
+    if (!PyList_Check(bitgens) || count < 0) {
+        PyErr_SetString(PyExc_ValueError, "start: a list of capsules and a count >= 0 expected");
+        return NULL;
+    }
+    Views v = {.count = 0};
+    PyObject *result = NULL;
+    Py_ssize_t k, words, n = PyList_GET_SIZE(bitgens);
+    uint64_t *origins = take(&v, args[3], 8, "QLK", 1, "origins", &words);
+    const int64_t *envs = origins == NULL ? NULL : env_indices(&v, args[1], n, &k);
+    if (envs == NULL)
+        goto done;
+    if (words != ORIGIN * n) {
+        PyErr_Format(PyExc_ValueError, "origins: %d words per generator expected", ORIGIN);
+        goto done;
+    }
+    for (Py_ssize_t j = 0; j < k; j++)
+        if (!PyCapsule_IsValid(PyList_GET_ITEM(bitgens, envs[j]), "BitGenerator")) {
+            PyErr_SetString(PyExc_TypeError, "start: bitgens holds a non-BitGenerator capsule");
+            goto done;
+        }
+    /* the outputs a draw takes: all `count` from new outputs, or the first from the buffer */
+    uint64_t fresh[2] = {(uint64_t)count, count > 0 ? (uint64_t)count - 1 : 0};
+    u128 mult[2], sum[2];
+    for (int h = 0; h < 2; h++)
+        jump_of((fresh[h] + 1) / 2, &mult[h], &sum[h]);
+    for (Py_ssize_t j = 0; j < k; j++) {
+        BitGen *bg = PyCapsule_GetPointer(PyList_GET_ITEM(bitgens, envs[j]), "BitGenerator");
+        Pcg64 *g = bg->state;
+        uint64_t *o = origins + ORIGIN * envs[j];
+        const int h = g->has_uint32 != 0;
+        o[0] = (uint64_t)g->lcg->state;
+        o[1] = (uint64_t)(g->lcg->state >> 64);
+        o[2] = (uint64_t)g->lcg->inc;
+        o[3] = (uint64_t)(g->lcg->inc >> 64);
+        o[4] = (uint64_t)h;
+        o[5] = g->uinteger;
+        if (count == 0)
+            continue;
+        if (fresh[h] == 0) { /* the one number came from the buffer */
+            g->has_uint32 = 0;
+            continue;
+        }
+        g->lcg->state = mult[h] * g->lcg->state + sum[h] * g->lcg->inc;
+        g->uinteger = (uint32_t)(output(g->lcg->state) >> 32);
+        g->has_uint32 = (int)(fresh[h] & 1); /* an odd count of new halves leaves one kept */
+    }
+    result = Py_NewRef(Py_None);
+done:
+    release(&v);
+    return result;
+}
+
+/* rows(origins, envs, lo, hi, out): out[r, j] <- number lo + r of the episode drawn from
+ * origins[envs[j]], for r in [0, hi - lo); out is float32 (hi - lo, len(envs)). */
+static PyObject *rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (nargs != 5) {
+        PyErr_SetString(PyExc_TypeError, "rows(origins, envs, lo, hi, out)");
+        return NULL;
+    }
+    long long lo = PyLong_AsLongLong(args[2]), hi = PyLong_AsLongLong(args[3]);
+    if ((lo == -1 || hi == -1) && PyErr_Occurred())
+        return NULL;
+    if (lo < 0 || hi < lo) {
+        PyErr_SetString(PyExc_ValueError, "rows: 0 <= lo <= hi expected");
+        return NULL;
+    }
+    Views v = {.count = 0};
+    PyObject *result = NULL;
+    Py_ssize_t k, words, items;
+    const uint64_t *origins = take(&v, args[0], 8, "QLK", 0, "origins", &words);
+    if (origins != NULL && words % ORIGIN != 0) {
+        PyErr_Format(PyExc_ValueError, "rows: origins of %d words each expected", ORIGIN);
+        goto done;
+    }
+    const int64_t *envs = origins == NULL ? NULL : env_indices(&v, args[1], words / ORIGIN, &k);
+    float *out = envs == NULL ? NULL : take(&v, args[4], 4, "f", 1, "out", &items);
+    if (out == NULL)
+        goto done;
+    if (items != (Py_ssize_t)(hi - lo) * k) {
+        PyErr_SetString(PyExc_ValueError, "rows: out of (hi - lo, len(envs)) numbers expected");
+        goto done;
+    }
+    /* number q of an episode is the buffer's (q = 0 where it has one) or new half f = q - has:
+     * the low (f even) or high half of output f / 2 + 1 */
+    u128 mult[2], sum[2];
+    for (int h = 0; h < 2; h++) {
+        long long f = lo - h < 0 ? 0 : lo - h;
+        jump_of((uint64_t)(f / 2 + 1), &mult[h], &sum[h]);
+    }
+    /* TILE envs at a time, each env's numbers into a scratch row, then written out a step at a
+     * time: a row of TILE floats is a cache line, where writing down one column at a time
+     * would touch a line (and a page) per number */
+    const Py_ssize_t r = (Py_ssize_t)(hi - lo);
+    float *scratch = r == 0 ? NULL : PyMem_Malloc((size_t)(TILE * r) * sizeof(float));
+    if (r > 0 && scratch == NULL) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    for (Py_ssize_t j0 = 0; j0 < k && r > 0; j0 += TILE) {
+        const Py_ssize_t b = k - j0 < TILE ? k - j0 : TILE;
+        for (Py_ssize_t t = 0; t < b; t++) {
+            const uint64_t *o = origins + ORIGIN * envs[j0 + t];
+            const int h = o[4] != 0;
+            float *col = scratch + t * r, *end = col + r;
+            if (h && lo == 0) /* the kept half */
+                *col++ = uniform((uint32_t)o[5]);
+            if (col == end)
+                continue;
+            const u128 inc = join(o[2], o[3]);
+            u128 s = mult[h] * join(o[0], o[1]) + sum[h] * inc;
+            uint64_t word = output(s);
+            if ((lo - h) & 1 && lo > 0) { /* starting on the high half of the jumped-to output */
+                *col++ = uniform((uint32_t)(word >> 32));
+            } else {
+                *col++ = uniform((uint32_t)word);
+                if (col < end)
+                    *col++ = uniform((uint32_t)(word >> 32));
+            }
+            while (col < end) {
+                s = MULTIPLIER * s + inc;
+                word = output(s);
+                *col++ = uniform((uint32_t)word);
+                if (col < end)
+                    *col++ = uniform((uint32_t)(word >> 32));
+            }
+        }
+        for (Py_ssize_t q = 0; q < r; q++)
+            for (Py_ssize_t t = 0; t < b; t++)
+                out[q * k + j0 + t] = scratch[t * r + q];
+    }
+    PyMem_Free(scratch);
+    result = Py_NewRef(Py_None);
+done:
+    release(&v);
+    return result;
+}
+
+static PyMethodDef methods[] = {
+    {"start", (PyCFunction)(void (*)(void))start, METH_FASTCALL, "Record episodes' origins, move the generators on."},
+    {"rows", (PyCFunction)(void (*)(void))rows, METH_FASTCALL, "Numbers [lo, hi) of episodes from their origins."},
+    {NULL, NULL, 0, NULL},
+};
+
+static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_draw_kernel", "Episode draws from PCG64 generators.",
+                                    -1, methods};
+
+PyMODINIT_FUNC PyInit__draw_kernel(void) { return PyModule_Create(&module); }
+
+#else /* no 128-bit integers: no module, the package draws with numpy */
+
+PyMODINIT_FUNC PyInit__draw_kernel(void)
+{
+    PyErr_SetString(PyExc_ImportError, "_draw_kernel needs a compiler with 128-bit integers");
+    return NULL;
+}
+
+#endif
