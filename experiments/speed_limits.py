@@ -4,7 +4,9 @@ Two promises of the envs cost time: an env gives the same bits alone and in a ba
 float step and the array step share one power function: the joint's own,
 :mod:`ssme_envs.models.joint_power`, compiled with the joint's RK4 in ``_joint_kernel.c``), and
 the native vector env equals gymnasium's ``SyncVectorEnv`` (so each sub-env draws its episodes
-from its own generator: one generator call per restart). This script measures the joint's RK4
+from its own generator: where the draw kernel is built, one jump of the sub-env's PCG64 generator
+per restart, made for all restarting sub-envs in one call; else one generator call per restart).
+This script measures the joint's RK4
 (compiled kernel and Python reference) and those calls beside Pendulum-v1 and CartPole-v1's
 native vector env in the same run, and gives the best ratio each env could reach were
 everything else in its step free.
@@ -25,8 +27,9 @@ import numpy as np
 
 import ssme_envs  # noqa: F401  (registers the environments)
 from ssme_envs import bench
-from ssme_envs.envs import catalogue
+from ssme_envs.envs import catalogue, episode_draws
 from ssme_envs.envs.engine_task import EngineTask
+from ssme_envs.envs.episode_draws import EpisodeDraws
 from ssme_envs.envs.launcher_pitch import LauncherTask
 from ssme_envs.envs.nozzle_task import NozzleTask
 from ssme_envs.envs.task import FLOATS
@@ -128,9 +131,23 @@ def restarts_per_step(env_id: str) -> float:
     return ended / steps
 
 
+def kernel_start(draw: int, rounds: int) -> float:
+    """Seconds per restart's draw with the draw kernel: N sub-envs' episodes of ``draw`` float32
+    uniforms started in one call (each generator jumped past its draw), over N."""
+    draws = EpisodeDraws(draw, [np.random.default_rng(i) for i in range(N)])
+    envs = np.arange(N)
+
+    def run(_: int) -> float:
+        start = timeit.default_timer()
+        draws.start(envs)
+        return timeit.default_timer() - start
+
+    return _best(run, N, rounds)
+
+
 def generator_call(draw: int, rounds: int) -> float:
     """Seconds per restart's draw: one sub-env generator filling ``draw`` float32 uniforms, as
-    the vector env's restart does (N generators, one call each)."""
+    the vector env's restart does without the draw kernel (N generators, one call each)."""
     rngs = [np.random.default_rng(i) for i in range(N)]
     rows = list(np.empty((N, draw), dtype=np.float32))
     single = np.float32
@@ -180,7 +197,9 @@ def main() -> None:
         f"native vector env, N = {N}: {cartpole['zero'] * 1e6:.0f} us per step (zero actions), "
         f"{cartpole['random'] * 1e6:.0f} us (random actions). The joint's RK4 runs "
         f"{'the compiled kernel' if compiled else 'the Python reference (no kernel built)'}, the "
-        f"engine's float step {'its' if engine_step.KERNEL == 'compiled' else 'no'} compiled kernel.",
+        f"engine's float step {'its' if engine_step.KERNEL == 'compiled' else 'no'} compiled kernel, the "
+        f"vector envs' episode draws {'their' if episode_draws.KERNEL == 'compiled' else 'no'} "
+        "compiled kernel.",
         "",
         "The joint's RK4 over one env step (its RK4 steps, a power |w|^n per stage), on one nozzle "
         "and on N nozzles, as the package runs it and as its Python reference (numpy on "
@@ -207,8 +226,10 @@ def main() -> None:
         "over the plant arithmetic of one env step on one env (the engine's plant step on floats, "
         "the joint's RK4 of one env step on one nozzle). Vector, zero actions: CartPole's "
         "step over `ssme-envs bench`'s plant floor (the env's plant arithmetic for N envs). "
-        "Vector, random actions: the same plus one generator call per restart (a call that draws "
-        "two numbers: the least a restart can cost; today's draws the whole episode's uniforms). "
+        "Vector, random actions: the same plus each restart's draw, the least a restart can cost: "
+        "with the draw kernel, its start of the episode (the sub-env's generator jumped past the "
+        "draw, all restarting sub-envs in one call); without it, one generator call that draws "
+        "two numbers (the vector env's draws the whole episode's uniforms). "
         "Beside them, today's ratio of the env (`ssme-envs bench`'s measurement) and the time per "
         "step the floor leaves beside those costs, with what the rest takes today.",
         "",
@@ -232,8 +253,9 @@ def main() -> None:
             )
         plant = bench.plant_floor(env_id, N, rounds=rounds)
         restarts = restarts_per_step(env_id)
-        call = generator_call(2, rounds)
-        draw = generator_call(catalogue.spec(env_id).build_task().draw_size, rounds)
+        size = catalogue.spec(env_id).build_task().draw_size
+        call = kernel_start(size, rounds) if episode_draws.KERNEL == "compiled" else generator_call(2, rounds)
+        draw = generator_call(size, rounds)
         for kind in ("zero", "random"):
             restart_cost = restarts * call if kind == "random" else 0.0
             run, close = bench._vector_stepper(env_id, N, kind)
@@ -244,7 +266,8 @@ def main() -> None:
             shown = (
                 "-"
                 if kind == "zero"
-                else f"{restarts:.0f} x {call * 1e6:.2f} us ({draw * 1e6:.2f} us with the episode's draw)"
+                else f"{restarts:.0f} x {call * 1e6:.2f} us (a generator call for the episode: "
+                f"{draw * 1e6:.2f} us)"
             )
             room = _room(cartpole[kind] / floors["vector"], plant + restart_cost, ours)
             lines.append(
@@ -264,8 +287,8 @@ def main() -> None:
         "",
         "A floor beyond its bound is out of reach while both promises hold, whatever the rest of "
         "the step: with zero actions it would need faster plant arithmetic than the compiled "
-        "kernel's; with random actions, a cheaper way than one generator call per restart to "
-        "draw sub-envs' episodes from their own generators. A floor within its bound but not met "
+        "kernel's; with random actions, a cheaper way than the restart's draw above to draw "
+        "sub-envs' episodes from their own generators. A floor within its bound but not met "
         "needs the rest of the step (restarts and their episodes' noise and references, the "
         "task's step beside the plant, the vector bookkeeping) cut to the room the last column "
         "gives.",

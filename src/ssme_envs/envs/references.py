@@ -120,8 +120,8 @@ def reference_signals(
         count = _hold_count(length, dt)
         shortest, longest = round(1.0 / dt), round(3.0 / dt)
         holds = shortest + np.floor(uniforms[:count] * (longest - shortest + 1)).astype(np.intp)
-        levels = (2.0 * uniforms[count:].reshape(count, channels, k) - 1.0) * amplitude[:, None]
-        ends = np.cumsum(holds, axis=0)
+        ends = holds.copy()
+        _accumulate_rows(ends)  # integer sums: cumsum's bits, without its strided walk
         # flat index of (hold, episode) at every step: episode i at hold j is j k + i; the block
         # starts from the holds ended by its first step and moves on by k at each new hold, so
         # that a block costs its own steps, not the episode's prefix
@@ -134,7 +134,9 @@ def reference_signals(
         _accumulate_rows(index)
         refs = np.empty((channels, stop - start, k))
         for c in range(channels):  # mode "clip" (indices are in range) writes without buffering
-            np.take(np.ascontiguousarray(levels[:, c]), index, out=refs[c], mode="clip")
+            level = 2.0 * uniforms[count + c :: channels] - 1.0  # hold h's row is count + h channels + c
+            level *= amplitude[c]
+            np.take(level, index, out=refs[c], mode="clip")
         return refs
     if kind == "step":
         at = np.floor(uniforms[0] * max(1, int(0.4 * length)))
