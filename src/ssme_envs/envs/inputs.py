@@ -96,7 +96,8 @@ def check_vector_memory(task: Any, num_envs: int) -> None:
     """ValueError when ``num_envs`` sub-envs of ``task`` would not fit in memory: per sub-env its
     episode's references (float64) and unit noise (float32) per channel and step, with the
     temporaries of a reset computing them (``TRANSIENT_COPIES``), its uniform draws twice
-    (float32, as drawn and transposed), and :data:`SUB_ENV_BYTES`."""
+    (float32: the table of whole draws held without the draw kernel, and a block read from it),
+    and :data:`SUB_ENV_BYTES`."""
     from ssme_envs.cli_checks import TRANSIENT_COPIES, check_memory
 
     steps = task.n_channels * (task.horizon + 1)
