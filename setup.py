@@ -23,7 +23,12 @@ class BuildExt(build_ext):
 
 setup(
     ext_modules=[
-        Extension(f"ssme_envs.models.{name}", [f"src/ssme_envs/models/{name}.c"], optional=True)
+        Extension(
+            f"ssme_envs.models.{name}",
+            [f"src/ssme_envs/models/{name}.c"],
+            depends=["src/ssme_envs/models/_buffers.h"],
+            optional=True,
+        )
         for name in ("_joint_kernel", "_engine_kernel", "_draw_kernel")
     ],
     cmdclass={"build_ext": BuildExt},

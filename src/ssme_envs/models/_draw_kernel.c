@@ -19,6 +19,8 @@
 #include <stdint.h>
 #include <string.h>
 
+#include "_buffers.h"
+
 #if defined(__SIZEOF_INT128__)
 
 typedef unsigned __int128 u128;
@@ -68,43 +70,10 @@ static inline float uniform(uint32_t u) { return (float)(u >> 8) * (1.0f / 16777
 
 static inline u128 join(uint64_t lo, uint64_t hi) { return ((u128)hi << 64) | lo; }
 
-enum { MAX_VIEWS = 3 };
-typedef struct {
-    Py_buffer views[MAX_VIEWS];
-    int count;
-} Views;
-
-static void release(Views *v)
-{
-    for (int i = 0; i < v->count; i++)
-        PyBuffer_Release(&v->views[i]);
-    v->count = 0;
-}
-
-/* a C-contiguous buffer of items of `itemsize` bytes and one of the format codes `codes`, its
- * item count into *items; NULL with an error otherwise */
-static void *take(Views *v, PyObject *obj, Py_ssize_t itemsize, const char *codes, int writable,
-                  const char *name, Py_ssize_t *items)
-{
-    Py_buffer *view = &v->views[v->count];
-    int flags = PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0);
-    if (v->count >= MAX_VIEWS || PyObject_GetBuffer(obj, view, flags) < 0)
-        return NULL;
-    v->count++;
-    const char *format = view->format == NULL ? "B" : view->format;
-    char code = format[0] == '<' || format[0] == '=' || format[0] == '@' ? format[1] : format[0];
-    if (view->itemsize != itemsize || code == '\0' || strchr(codes, code) == NULL) {
-        PyErr_Format(PyExc_ValueError, "%s: a C-contiguous array of type '%s' expected", name, codes);
-        return NULL;
-    }
-    *items = view->len / itemsize;
-    return view->buf;
-}
-
 /* the env indices, each checked within [0, n) */
 static const int64_t *env_indices(Views *v, PyObject *obj, Py_ssize_t n, Py_ssize_t *k)
 {
-    const int64_t *envs = take(v, obj, 8, "qlL", 0, "envs", k);
+    const int64_t *envs = take(v, obj, 8, "qlL", -1, 0, "envs", k);
     if (envs == NULL)
         return NULL;
     for (Py_ssize_t j = 0; j < *k; j++)
@@ -135,7 +104,7 @@ static PyObject *start(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     Views v = {.count = 0};
     PyObject *result = NULL;
     Py_ssize_t k, words, n = PyList_GET_SIZE(bitgens);
-    uint64_t *origins = take(&v, args[3], 8, "QLK", 1, "origins", &words);
+    uint64_t *origins = take(&v, args[3], 8, "QLK", -1, 1, "origins", &words);
     const int64_t *envs = origins == NULL ? NULL : env_indices(&v, args[1], n, &k);
     if (envs == NULL)
         goto done;
@@ -198,13 +167,13 @@ static PyObject *rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     Views v = {.count = 0};
     PyObject *result = NULL;
     Py_ssize_t k, words, items;
-    const uint64_t *origins = take(&v, args[0], 8, "QLK", 0, "origins", &words);
+    const uint64_t *origins = take(&v, args[0], 8, "QLK", -1, 0, "origins", &words);
     if (origins != NULL && words % ORIGIN != 0) {
         PyErr_Format(PyExc_ValueError, "rows: origins of %d words each expected", ORIGIN);
         goto done;
     }
     const int64_t *envs = origins == NULL ? NULL : env_indices(&v, args[1], words / ORIGIN, &k);
-    float *out = envs == NULL ? NULL : take(&v, args[4], 4, "f", 1, "out", &items);
+    float *out = envs == NULL ? NULL : take(&v, args[4], 4, "f", -1, 1, "out", &items);
     if (out == NULL)
         goto done;
     if (items != (Py_ssize_t)(hi - lo) * k) {

@@ -12,6 +12,8 @@
 #include <math.h>
 #include <string.h>
 
+#include "_buffers.h"
+
 static double number(PyObject *obj, int *err)
 {
     double value = PyFloat_AsDouble(obj);
@@ -157,42 +159,6 @@ done:
  * any state is written, so a refused call leaves the state as it was. */
 
 #define CHUNK 256
-
-enum { MAX_VIEWS = 24 };
-typedef struct {
-    Py_buffer views[MAX_VIEWS];
-    int count;
-} Views;
-
-static void release(Views *v)
-{
-    for (int i = 0; i < v->count; i++)
-        PyBuffer_Release(&v->views[i]);
-    v->count = 0;
-}
-
-/* a C-contiguous buffer of `count` items (count < 0: any number, into *items) of `itemsize`
- * bytes and one of the format codes `codes`; NULL with an error otherwise */
-static void *take(Views *v, PyObject *obj, Py_ssize_t itemsize, const char *codes, Py_ssize_t count,
-                  int writable, const char *name, Py_ssize_t *items)
-{
-    Py_buffer *view = &v->views[v->count];
-    int flags = PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0);
-    if (v->count >= MAX_VIEWS || PyObject_GetBuffer(obj, view, flags) < 0)
-        return NULL;
-    v->count++;
-    const char *format = view->format == NULL ? "B" : view->format;
-    char code = format[0] == '<' || format[0] == '=' || format[0] == '@' ? format[1] : format[0];
-    if (view->itemsize != itemsize || code == '\0' || strchr(codes, code) == NULL
-        || (count >= 0 && view->len != count * itemsize)) {
-        PyErr_Format(PyExc_ValueError, "%s: a C-contiguous array of %zd items of type '%s' expected", name,
-                     count, codes);
-        return NULL;
-    }
-    if (items != NULL)
-        *items = view->len / itemsize;
-    return view->buf;
-}
 
 /* the config array's entries */
 enum { SCALE, S0, S1, DT, LIMIT, ERROR_WEIGHT, RATE_WEIGHT, ENVELOPE, COST_BOUND, HORIZON, FAULT_KIND,
