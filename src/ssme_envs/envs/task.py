@@ -121,11 +121,11 @@ class TrackingTask(Protocol):
     Episodes are drawn from ``draw_size`` uniform float32 numbers per episode (one generator call
     at reset), the last ``plant_draw_size`` of which (0: none) draw the episode's plant:
     ``initial_state(n, plants)`` gets them (plant_draw_size, n) and puts the drawn plant in the
-    state. ``episodes(uniforms, start, stop)`` turns them (draw_size, k, :class:`Uniforms`: read in
-    row slices) into the references
-    and unit sensor noise of steps [start, stop), (channels, stop - start, k) each, equal to the
-    same steps of the whole episode. The envs ask for the steps as episodes reach them
-    (:func:`next_stop`), so that a reset costs the same whatever the episode's length.
+    state. ``episodes(uniforms, start, stop)`` turns them (draw_size, k; a :class:`Uniforms`, read
+    in row slices) into the references and unit sensor noise of steps [start, stop), (channels,
+    stop - start, k) each, equal to the same steps of the whole episode. The envs ask for the
+    steps as episodes reach them (:func:`next_stop`), so that a reset costs the same whatever the
+    episode's length.
     ``step(state, action, t, ref, noise, ops)``: ``action``, ``ref`` and ``noise`` per channel
     (floats, or rows of N envs; noise float64), ``t`` the step index after the step; returns
     (state, observation values in the layout's order, reward, terminated). A task whose
