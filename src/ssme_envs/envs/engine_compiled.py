@@ -61,6 +61,17 @@ def batch_args(task: EngineTask, table: bytes, width: int, scheduled: bool) -> B
     return BatchArgs(task, table, width, scheduled)
 
 
+def compiled_args(task: EngineTask) -> tuple[tuple | None, BatchArgs | None]:
+    """The task's compiled steps' arguments from its ``kernel_steps()``, (None, None) without the
+    kernel: the float step's after the commands and nominal valves (half the backlash, stiction,
+    ``pair_table``'s table and width), and :func:`batch_args`."""
+    if engine_step._KERNEL is None:
+        return None, None
+    steps, scheduled = task.kernel_steps()
+    table = engine_step.pair_table(steps)
+    return (*task.rows[3:], *table), batch_args(task, *table, scheduled)
+
+
 def plant_step(task: EngineTask, plant: EnginePlant, command: np.ndarray, t: np.ndarray) -> EnginePlant:
     """The task's plant on arrays under the commands (2, N) of step t - 1 -> t, stepped in place
     (the arrays of ``plant``, returned)."""
@@ -89,4 +100,4 @@ def task_step(
     return (plant, integral, (action[0], action[1]), held), values, reward, terminated
 
 
-__all__ = ["BatchArgs", "batch_args", "plant_step", "task_step"]
+__all__ = ["BatchArgs", "batch_args", "compiled_args", "plant_step", "task_step"]

@@ -36,7 +36,6 @@ from ssme_envs.models.engine_step import (
     StepParameters,
     pair_rows,
     pair_step_reference,
-    pair_table,
     step_arrays,
 )
 from ssme_envs.models.linked import LinkedEngineModel
@@ -109,8 +108,8 @@ class EngineTask:
     fault_step: int = field(init=False)  # the step after which the fault acts (-1: none)
     # largest reward loss of one step inside the envelope (errors and valve rates at their bounds)
     step_cost_bound: float = field(init=False)
-    # the compiled float step's arguments after the commands (nominal valves, half the backlash,
-    # stiction, engine_step.pair_table's table and width), None without the kernel
+    # the compiled float step's arguments after the commands and nominal valves (half the
+    # backlash, stiction, engine_step.pair_table's table and width), None without the kernel
     kernel_args: tuple | None = field(init=False, repr=False)
     batch_args: engine_compiled.BatchArgs | None = field(init=False, repr=False, compare=False)
 
@@ -182,6 +181,11 @@ class EngineTask:
         )
 
     def __post_init__(self) -> None:
+        self._derive()
+        self._compile()
+
+    def _derive(self) -> None:
+        """The fields derived from the others, but the compiled steps' arguments."""
         if self.nonlinear is not None:
             # the nonlinear engine's plant step and start, as instance attributes: the point
             # model's step path keeps its method lookups as they are
@@ -190,8 +194,6 @@ class EngineTask:
         k_rows, b_rows, lam = self.params.floats()
         pairs = pair_rows(self.params.shift_source, k_rows, b_rows)
         object.__setattr__(self, "rows", (pairs, *lam, self.params.half_backlash, self.params.stiction))
-        table = None if engine_step._KERNEL is None else pair_table([(lam, pairs)])
-        object.__setattr__(self, "kernel_args", None if table is None else (0.0, 0.0, *self.rows[3:], *table))
         object.__setattr__(self, "noise_scale", tuple(self.noise_std.tolist()))
         object.__setattr__(self, "noise_scale_arrays", tuple(np.full(1, s) for s in self.noise_scale))
         offsets = None if self.offset_table is None else Schedule.of(self.offset_table)
@@ -210,8 +212,18 @@ class EngineTask:
         object.__setattr__(
             self, "step_cost_bound", self.error_weight * 2 * error**2 + self.rate_weight * 2 * 2.0**2
         )
-        args = None if table is None else engine_compiled.batch_args(self, *table, scheduled=False)
-        object.__setattr__(self, "batch_args", args)
+
+    def kernel_steps(self) -> tuple[list, bool]:
+        """What the compiled steps read per step, ``[(lambda - 1 of both valves, pair rows)]``, and
+        whether the steps follow a schedule (False: one step's, about zero nominal valves)."""
+        pairs, g0, g1 = self.rows[:3]
+        return [((g0, g1), pairs)], False
+
+    def _compile(self) -> None:
+        """``kernel_args`` and ``batch_args`` from :meth:`kernel_steps` (None without the kernel)."""
+        kernel_args, batch_args = engine_compiled.compiled_args(self)
+        object.__setattr__(self, "kernel_args", kernel_args)
+        object.__setattr__(self, "batch_args", batch_args)
 
     def design_model(self, source: str = "identified") -> AlphaCanonicalModel:
         """The linear model a controller is designed on: :func:`design_model` at the env's power;
@@ -305,7 +317,7 @@ class EngineTask:
         x, linkage, valve = plant
         if self.kernel_args is not None:  # the reference's operations, compiled
             kernel = engine_step._KERNEL
-            x, linkage, valve = kernel.pair_step(x, linkage, valve, *command, *self.kernel_args, 0)
+            x, linkage, valve = kernel.pair_step(x, linkage, valve, *command, 0.0, 0.0, *self.kernel_args, 0)
         else:  # gains about zero: |v - 0| is |v|, bit for bit
             pairs, g0, g1, half, stick = self.rows
             x, linkage, valve = pair_step_reference(

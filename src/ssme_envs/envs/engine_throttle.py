@@ -22,7 +22,6 @@ from ssme_envs.models.engine_step import (
     dynamics_arrays,
     pair_rows,
     pair_step_reference,
-    pair_table,
     valves_arrays,
 )
 from ssme_envs.models.linked import POWER_RANGE, LinkedEngineModel
@@ -83,7 +82,7 @@ class ThrottleTask(EngineTask):
     schedule_parts: tuple = field(init=False, repr=False)  # (rows, shape) of each table in it
 
     def __post_init__(self) -> None:
-        super().__post_init__()
+        self._derive()
         tables = (self.k_table, self.b_table, self.lam_table, self.state_offsets)
         rows = [np.moveaxis(table, 0, -1).reshape(-1, table.shape[0]) for table in tables]
         ends = np.cumsum([len(block) for block in rows])
@@ -99,10 +98,11 @@ class ThrottleTask(EngineTask):
         ]
         object.__setattr__(self, "schedule", Schedule(per_step, np.ascontiguousarray(np.concatenate(rows))))
         object.__setattr__(self, "schedule_parts", parts)
-        if self.kernel_args is not None:  # the rows of every step of the schedule
-            table = pair_table((lam, rows) for rows, lam in per_step)
-            object.__setattr__(self, "kernel_args", (*self.rows[3:], *table))
-            object.__setattr__(self, "batch_args", engine_compiled.batch_args(self, *table, scheduled=True))
+        self._compile()
+
+    def kernel_steps(self) -> tuple[list, bool]:
+        """The rows of every step of the schedule (see :meth:`EngineTask.kernel_steps`)."""
+        return [(lam, rows) for rows, lam in self.schedule.floats], True
 
     @classmethod
     def build_throttle(
