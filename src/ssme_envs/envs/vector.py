@@ -186,12 +186,19 @@ class TrackingVectorEnv(VectorEnv):
         return CLIP_UFUNC(obs, self._low, self._high)
 
     def _extend(self, t: np.ndarray) -> None:
-        """Compute the next block of the episodes that reach their uncomputed steps at ``t``."""
+        """Compute the next block of the episodes that reach their uncomputed steps at ``t``, and
+        of those of the same position within half a block of it: unsynced episodes (random
+        actions) reach a position a few at a step, and a block's numpy calls cost more than its
+        numbers, so that one call serves the next steps' arrivals too."""
         self._t_bound = int(t.max())
         late = np.flatnonzero(t >= self._ready)
         starts = self._ready[late]
-        for start in np.unique(starts).tolist():  # one block per episode position (synced: one)
-            self._compute(late if starts[0] == starts[-1] else late[starts == start], start)
+        if starts[0] == starts[-1] and len(late) == self.num_envs:  # synced: every episode
+            self._compute(late, int(starts[0]))
+            return
+        for start in np.unique(starts).tolist():
+            ahead = (next_stop(start, self.task.horizon + 1) - start) // 2
+            self._compute(np.flatnonzero((self._ready == start) & (t >= start - ahead)), start)
 
     def _compute(self, envs: np.ndarray, start: int) -> tuple[np.ndarray, np.ndarray]:
         """The references and noise of the next block (:func:`next_stop`) of the episodes
