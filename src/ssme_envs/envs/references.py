@@ -119,23 +119,28 @@ def reference_signals(
     if kind == "random_steps":
         count = _hold_count(length, dt)
         shortest, longest = round(1.0 / dt), round(3.0 / dt)
-        holds = shortest + np.floor(uniforms[:count] * (longest - shortest + 1)).astype(np.intp)
-        ends = holds.copy()
+        # hold j ends at step (j + 1) shortest or later: only the first `live` can end in the block
+        live = min(count, (stop - 1) // shortest)
+        ends = shortest + np.floor(uniforms[:live] * (longest - shortest + 1)).astype(np.intp)
         _accumulate_rows(ends)  # integer sums: cumsum's bits, without its strided walk
         # flat index of (hold, episode) at every step: episode i at hold j is j k + i; the block
         # starts from the holds ended by its first step and moves on by k at each new hold, so
         # that a block costs its own steps, not the episode's prefix
-        index = np.zeros((stop - start, k), dtype=np.intp)
+        index = np.empty((stop - start, k), dtype=np.intp)
         index[0] = np.arange(k)
         if start:  # no hold ends at step 0
             index[0] += k * np.add.reduce(ends <= start, axis=0, dtype=np.intp)
-        rows, cols = np.nonzero((ends > start) & (ends < stop) if start else ends < stop)
-        index[ends[rows, cols] - start, cols] = k
-        _accumulate_rows(index)
+        rows, cols = np.nonzero((ends > start) & (ends < stop))
+        if rows.size:
+            index[1:] = 0
+            index[ends[rows, cols] - start, cols] = k
+            _accumulate_rows(index)
+        else:  # no hold ends in the block (a reset's first block, on every env)
+            index[1:] = index[0]
         refs = np.empty((channels, stop - start, k))
         for c in range(channels):  # mode "clip" (indices are in range) writes without buffering
-            level = 2.0 * uniforms[count + c :: channels] - 1.0  # hold h's row is count + h channels + c
-            level *= amplitude[c]
+            level = 2.0 * uniforms[count + c : count + (live + 1) * channels : channels] - 1.0
+            level *= amplitude[c]  # hold h's row is count + h channels + c
             np.take(level, index, out=refs[c], mode="clip")
         return refs
     if kind == "step":
