@@ -210,10 +210,11 @@ class TrackingVectorEnv(VectorEnv):
             self._noise[:, start:stop] = noise
             if self._refs is not None:
                 self._refs[:, start:stop] = refs
-        else:
-            self._noise[:, start:stop, envs] = noise
-            if self._refs is not None:
-                self._refs[:, start:stop, envs] = refs
+        else:  # one flat index per channel: numpy's fast path, where [:, slice, envs] is its slow one
+            flat = np.arange(start * self.num_envs, stop * self.num_envs, self.num_envs)[:, None] + envs
+            for table, block in ((self._noise, noise), (self._refs, refs)):
+                for c in range(0 if table is None else len(table)):
+                    table[c].reshape(-1)[flat] = block[c]
         self._ready[envs] = stop
         self._ready_min = int(self._ready.min())
         return refs, noise
