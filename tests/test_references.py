@@ -3,11 +3,15 @@ same bits for an episode drawn alone as in a batch."""
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy import stats
 
 from ssme_envs.envs.references import (
     MIXED_KINDS,
     REFERENCE_KINDS,
+    normal_pairs,
+    normal_rows,
     reference_signals,
     uniforms_needed,
     unit_normals,
@@ -90,3 +94,70 @@ def test_every_step_and_ramp_episode_moves():
     for i in range(100):
         assert np.flatnonzero(steps[0, :, i] != 0).size > 0
         assert np.flatnonzero(np.diff(ramps[0, :, i]) != 0).size > 0
+
+
+def _random_steps_by_loop(uniforms: np.ndarray, length: int, amplitude: np.ndarray, dt: float) -> np.ndarray:
+    """random_steps as documented, one episode and one step at a time: hold j lasts round(1/dt)
+    plus floor(u_j (round(3/dt) - round(1/dt) + 1)) steps at level (2 u - 1) amplitude of its
+    channel's row count + j channels + c."""
+    channels, k = amplitude.size, uniforms.shape[1]
+    shortest, longest = round(1.0 / dt), round(3.0 / dt)
+    count = -(-length // shortest)
+    refs = np.empty((channels, length, k))
+    for i in range(k):
+        hold, end = 0, shortest + int(np.floor(uniforms[0, i] * (longest - shortest + 1)))
+        for step in range(length):
+            if step >= end:
+                hold += 1
+                end += shortest + int(np.floor(uniforms[hold, i] * (longest - shortest + 1)))
+            for c in range(channels):
+                refs[c, step, i] = (2.0 * uniforms[count + hold * channels + c, i] - 1.0) * amplitude[c]
+    return refs
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    dt=st.sampled_from([0.008, 0.02, 0.04, 0.25, 1.0]),
+    length=st.integers(1, 400),
+    channels=st.integers(1, 3),
+    k=st.integers(1, 20),
+    cut=st.tuples(st.floats(0, 1), st.floats(0, 1)),
+    into=st.booleans(),
+    seed=st.integers(0, 2**32 - 1),
+)
+def test_random_steps_blocks_equal_a_step_by_step_loop(dt, length, channels, k, cut, into, seed):
+    rng = np.random.default_rng(seed)
+    amplitude = 0.5 + rng.random(channels)
+    uniforms = rng.random((uniforms_needed("random_steps", length, channels, dt), k), dtype=np.float32)
+    uniforms = uniforms.astype(np.float64)  # as the tasks pass them
+    start = min(int(cut[0] * length), length - 1)
+    stop = start + 1 + int(cut[1] * (length - start - 1))
+    expected = _random_steps_by_loop(uniforms, length, amplitude, dt)[:, start:stop]
+    table = np.full((channels, length + 3, k + 2), np.nan)  # a view into a larger table, as the vector env's
+    out = table[:, start:stop, 1 : k + 1] if into else None
+    block = reference_signals("random_steps", uniforms, length, amplitude, dt, start, stop, out)
+    assert block.tobytes() == np.ascontiguousarray(expected).tobytes()
+    if into:
+        assert block is out and np.isnan(table[:, :, 0]).all() and np.isnan(table[:, stop:]).all()
+
+
+@pytest.mark.parametrize("kind", REFERENCE_KINDS)
+def test_every_kind_writes_into_out_the_bits_it_returns(kind):
+    uniforms, whole = _draw(kind, 9)
+    for start, stop in ((0, 16), (16, 32), (64, LENGTH)):
+        table = np.zeros((2, LENGTH, 9))
+        block = reference_signals(kind, uniforms, LENGTH, AMPLITUDE, DT, start, stop, table[:, start:stop])
+        assert np.shares_memory(block, table)
+        assert table[:, start:stop].tobytes() == whole[:, start:stop].tobytes()
+
+
+def test_normals_write_into_out_the_bits_they_return():
+    uniforms = np.random.default_rng(5).random((2 * 40, 7), dtype=np.float32)
+    whole = unit_normals(uniforms)
+    table = np.zeros((3, 40, 7), dtype=np.float32)
+    normal_pairs(uniforms, 40, 8, 24, table[1:, 8:24])
+    assert table[1, 8:24].tobytes() == whole[8:24].tobytes()
+    assert table[2, 8:24].tobytes() == whole[48:64].tobytes()
+    row = np.zeros((16, 7), dtype=np.float32)
+    assert normal_rows(uniforms, 40, 30, 46, row) is row
+    assert row.tobytes() == whole[30:46].tobytes()

@@ -12,7 +12,7 @@ import numpy as np
 
 from ssme_envs.envs import catalogue
 from ssme_envs.envs.references import unit_normals
-from ssme_envs.envs.task import Carrier, Observation, TrackingTask
+from ssme_envs.envs.task import Blocks, Carrier, Observation, TrackingTask
 
 
 class ToyState(NamedTuple):
@@ -42,10 +42,12 @@ class ToyTask:
     def draw_size(self) -> int:
         return 2 * ((self.horizon + 2) // 2) + 1  # noise (an even count), then the reference
 
-    def episodes(self, uniforms: np.ndarray, start: int, stop: int) -> tuple:
+    def episodes(self, uniforms: np.ndarray, start: int, stop: int, out: Blocks | None = None) -> tuple:
         pairs = self.draw_size - 1
         noise = unit_normals(np.ascontiguousarray(uniforms[:pairs], dtype=np.float32))[start:stop][None]
         refs = np.repeat(uniforms[pairs:].astype(np.float64) - 0.5, stop - start, axis=0)[None]
+        if out is not None:  # the vector env's tables
+            out[0][...], out[1][...] = refs, noise
         return refs, noise
 
     plant_draw_size: ClassVar[int] = 0

@@ -21,6 +21,7 @@ from ssme_envs.envs.references import (
 )
 from ssme_envs.envs.task import (
     MAX_EPISODE_SECONDS,
+    Blocks,
     Carrier,
     Observation,
     Schedule,
@@ -256,24 +257,30 @@ class EngineTask:
         """Uniform float32 numbers one episode consumes: sensor noise, then the reference's."""
         return 2 * (self.horizon + 1) + uniforms_needed(self.reference, self.horizon + 1, 2, self.dt)
 
-    def episodes(self, uniforms: Uniforms, start: int, stop: int) -> tuple[np.ndarray, np.ndarray]:
+    def episodes(
+        self, uniforms: Uniforms, start: int, stop: int, out: Blocks | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
         """The steps [start, stop) of k episodes from their uniform draws, float32 (draw_size, k),
         episode axis last: references (2, stop - start, k) float64 and unit sensor noise (2,
         stop - start, k) float32, scaled by ``noise_std`` at each step. One float32 call to the
         generator per episode keeps the streams independent of how episodes are stepped; the
         steps are computed as episodes reach them, so that a reset costs the same whatever the
         episode's length. The noise of channel c, step s is row c (horizon + 1) + s of the
-        Box-Muller normals of the first 2 (horizon + 1) uniforms."""
+        Box-Muller normals of the first 2 (horizon + 1) uniforms. Written into ``out`` where
+        given (:class:`~ssme_envs.envs.task.TrackingTask`)."""
         length = self.horizon + 1
-        noise = normal_pairs(uniforms, length, start, stop)  # channel 0 the cosine rows, 1 the sine
-        return self.references(uniforms[2 * length :], start, stop), noise
+        refs_out, noise_out = (None, None) if out is None else out
+        noise = normal_pairs(uniforms, length, start, stop, noise_out)  # channel 0 cosines, 1 sines
+        return self.references(uniforms[2 * length :], start, stop, refs_out), noise
 
-    def references(self, uniforms: np.ndarray, start: int, stop: int) -> np.ndarray:
+    def references(
+        self, uniforms: np.ndarray, start: int, stop: int, out: np.ndarray | None = None
+    ) -> np.ndarray:
         """The references of k episodes from their uniforms (m, k): steps [start, stop), (2,
-        stop - start, k)."""
+        stop - start, k), written into ``out`` where given."""
         length = self.horizon + 1
         return reference_signals(
-            self.reference, uniforms.astype(np.float64), length, self.amplitude, self.dt, start, stop
+            self.reference, uniforms.astype(np.float64), length, self.amplitude, self.dt, start, stop, out
         )
 
     # The plant: point model with valves (this class) or the linked model (the throttle task).

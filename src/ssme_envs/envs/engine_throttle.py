@@ -165,10 +165,17 @@ class ThrottleTask(EngineTask):
     def shared_references(self) -> np.ndarray:
         return self.nominal_outputs
 
-    def references(self, uniforms: np.ndarray, start: int, stop: int) -> np.ndarray:
-        """The profile's references for every episode, a read-only view (2, stop - start, k)."""
+    def references(
+        self, uniforms: np.ndarray, start: int, stop: int, out: np.ndarray | None = None
+    ) -> np.ndarray:
+        """The profile's references for every episode, a read-only view (2, stop - start, k), or
+        written into ``out`` where given."""
         rows = self.nominal_outputs[start:stop].T[:, :, None]
-        return np.broadcast_to(rows, (2, stop - start, uniforms.shape[1]))
+        shared = np.broadcast_to(rows, (2, stop - start, uniforms.shape[1]))
+        if out is None:
+            return shared
+        out[...] = shared
+        return out
 
     # Plant state: [x (n), linkage (m), valve (m)], starting at the schedule's equilibrium. The
     # command of step t - 1 -> t is absolute (the schedule at t - 1 plus the action, faults

@@ -29,7 +29,7 @@ from ssme_envs.envs.nozzle_task import (
 )
 from ssme_envs.envs.plant_spread import covered_joints, resolve_spread
 from ssme_envs.envs.references import Fault
-from ssme_envs.envs.task import SYNCED, Carrier, Observation, Uniforms, Value, check_number
+from ssme_envs.envs.task import SYNCED, Blocks, Carrier, Observation, Uniforms, Value, check_number
 from ssme_envs.envs.tracking_env import TrackingEnv
 from ssme_envs.models.nozzle import (
     MAX_SUBSTEPS,
@@ -162,9 +162,11 @@ class LauncherTask:
     def observation_space(cls) -> gym.spaces.Box:
         return cls.observation.space()
 
-    def episodes(self, uniforms: Uniforms, start: int, stop: int) -> tuple[np.ndarray, np.ndarray]:
+    def episodes(
+        self, uniforms: Uniforms, start: int, stop: int, out: Blocks | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
         """The nozzle task's episodes: attitude references (rad) and unit noise of steps [start, stop)."""
-        return self.nozzle.episodes(uniforms, start, stop)
+        return self.nozzle.episodes(uniforms, start, stop, out)
 
     def nonfinite_reward(self, t: Any) -> Any:
         """As the nozzle task's :meth:`~ssme_envs.envs.nozzle_task.NozzleTask.nonfinite_reward`."""

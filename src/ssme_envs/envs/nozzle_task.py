@@ -16,6 +16,7 @@ from ssme_envs.envs.references import Fault, check_reference, normal_rows, refer
 from ssme_envs.envs.task import (
     MAX_EPISODE_SECONDS,
     SYNCED,
+    Blocks,
     Carrier,
     Observation,
     Uniforms,
@@ -264,18 +265,23 @@ class NozzleTask:
             length + length % 2 + uniforms_needed(self.reference, length, 1, self.dt) + self.plant_draw_size
         )
 
-    def episodes(self, uniforms: Uniforms, start: int, stop: int) -> tuple[np.ndarray, np.ndarray]:
+    def episodes(
+        self, uniforms: Uniforms, start: int, stop: int, out: Blocks | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
         """The steps [start, stop) of k episodes from their uniforms (draw_size, k) float32, as
         for the engine tasks: references (1, stop - start, k) in rad and unit noise (1, stop -
-        start, k) float32, row s of the Box-Muller normals of the first draws."""
+        start, k) float32, row s of the Box-Muller normals of the first draws; written into
+        ``out`` where given."""
         length = self.horizon + 1
         pairs = length + length % 2
-        noise = normal_rows(uniforms, pairs // 2, start, stop)[None]
+        refs_out, noise_out = (None, None) if out is None else out
+        noise = normal_rows(uniforms, pairs // 2, start, stop, None if noise_out is None else noise_out[0])
         ref_uniforms = uniforms[pairs : pairs + uniforms_needed(self.reference, length, 1, self.dt)]
         refs = reference_signals(
-            self.reference, ref_uniforms.astype(np.float64), length, self.amplitude, self.dt, start, stop
-        )
-        return refs, noise
+            self.reference, ref_uniforms.astype(np.float64), length, self.amplitude, self.dt, start, stop,
+            refs_out,
+        )  # fmt: skip
+        return refs, noise[None]
 
     def initial_state(self, n: int | None = None, plants: np.ndarray | None = None) -> NozzleState:
         """At rest (the rate estimate starts from the rest angle): floats (``n`` None) or arrays

@@ -64,13 +64,15 @@ def reference_signals(
     dt: float,
     start: int = 0,
     stop: int | None = None,
+    out: np.ndarray | None = None,
 ) -> np.ndarray:
     """References of k episodes of ``length`` steps, their steps [start, stop) (default: all),
-    shape (channels, stop - start, k), from uniforms in [0, 1) of shape (:func:`uniforms_needed`, k), for
-    deviations within +-amplitude per channel. The episode axis is last, the layout in which the
-    vector envs read one step of every env. Steps [start, stop) equal the same steps of the whole
-    episode; they cost in proportion to ``stop - start`` for random_steps, to ``stop`` for
-    the kinds whose level depends on every step before (attitude, prbs).
+    shape (channels, stop - start, k) (written into ``out`` where given), from uniforms in [0, 1)
+    of shape (:func:`uniforms_needed`, k), for deviations within +-amplitude per channel. The
+    episode axis is last, the layout in which the vector envs read one step of every env. Steps
+    [start, stop) equal the same steps of the whole episode; they cost in proportion to ``stop -
+    start`` for random_steps, to ``stop`` for the kinds whose level depends on every step before
+    (attitude, prbs).
 
     Kinds
     -----
@@ -89,8 +91,21 @@ def reference_signals(
     Every episode is computed from its own column alone, so one episode drawn by itself equals
     the same episode drawn in a batch.
     """
-    k, channels = uniforms.shape[1], amplitude.size
     stop = length if stop is None else stop
+    if kind == "random_steps":  # straight into ``out``
+        return _random_steps(uniforms, length, amplitude, dt, start, stop, out)
+    refs = _reference_block(kind, uniforms, length, amplitude, dt, start, stop)
+    if out is None:
+        return refs
+    out[...] = refs
+    return out
+
+
+def _reference_block(
+    kind: str, uniforms: np.ndarray, length: int, amplitude: np.ndarray, dt: float, start: int, stop: int
+) -> np.ndarray:
+    """:func:`reference_signals` of every kind but random_steps, a new array."""
+    k, channels = uniforms.shape[1], amplitude.size
     steps = np.arange(start, stop)[:, None]
     scale = amplitude[:, None, None]
     if kind == "zero":
@@ -116,33 +131,6 @@ def reference_signals(
         from scipy import signal  # here: importing it costs more than making an env
 
         return signal.lfilter(*_attitude_filter(dt), held, axis=1)[:, start:]
-    if kind == "random_steps":
-        count = _hold_count(length, dt)
-        shortest, longest = round(1.0 / dt), round(3.0 / dt)
-        # hold j ends at step (j + 1) shortest or later: only the first `live` can end in the block
-        live = min(count, (stop - 1) // shortest)
-        ends = shortest + np.floor(uniforms[:live] * (longest - shortest + 1)).astype(np.intp)
-        _accumulate_rows(ends)  # integer sums: cumsum's bits, without its strided walk
-        # flat index of (hold, episode) at every step: episode i at hold j is j k + i; the block
-        # starts from the holds ended by its first step and moves on by k at each new hold, so
-        # that a block costs its own steps, not the episode's prefix
-        index = np.empty((stop - start, k), dtype=np.intp)
-        index[0] = np.arange(k)
-        if start:  # no hold ends at step 0
-            index[0] += k * np.add.reduce(ends <= start, axis=0, dtype=np.intp)
-        rows, cols = np.nonzero((ends > start) & (ends < stop))
-        if rows.size:
-            index[1:] = 0
-            index[ends[rows, cols] - start, cols] = k
-            _accumulate_rows(index)
-        else:  # no hold ends in the block (a reset's first block, on every env)
-            index[1:] = index[0]
-        refs = np.empty((channels, stop - start, k))
-        for c in range(channels):  # mode "clip" (indices are in range) writes without buffering
-            level = 2.0 * uniforms[count + c : count + (live + 1) * channels : channels] - 1.0
-            level *= amplitude[c]  # hold h's row is count + h channels + c
-            np.take(level, index, out=refs[c], mode="clip")
-        return refs
     if kind == "step":
         at = np.floor(uniforms[0] * max(1, int(0.4 * length)))
         level = (2.0 * uniforms[1:] - 1.0) * amplitude[:, None]
@@ -160,6 +148,40 @@ def reference_signals(
             _accumulate_rows(flips[c], np.logical_xor)  # odd number of flips so far
         return np.where(flips[:, start:], -1.0, 1.0) * first[:, None, :] * scale
     raise ValueError(f"unknown reference kind {kind!r}; choose one of {', '.join(REFERENCE_KINDS)}")
+
+
+def _random_steps(
+    uniforms: np.ndarray, length: int, amplitude: np.ndarray, dt: float, start: int, stop: int,
+    out: np.ndarray | None,
+) -> np.ndarray:  # fmt: skip
+    """:func:`reference_signals`' random_steps, into ``out`` if given."""
+    k, channels = uniforms.shape[1], amplitude.size
+    count = _hold_count(length, dt)
+    shortest, longest = round(1.0 / dt), round(3.0 / dt)
+    # hold j ends at step (j + 1) shortest or later: only the first `live` can end in the block
+    live = min(count, (stop - 1) // shortest)
+    ends = shortest + np.floor(uniforms[:live] * (longest - shortest + 1)).astype(np.intp)
+    _accumulate_rows(ends)  # integer sums: cumsum's bits, without its strided walk
+    # flat index of (hold, episode) at every step: episode i at hold j is j k + i; the block
+    # starts from the holds ended by its first step and moves on by k at each new hold, so
+    # that a block costs its own steps, not the episode's prefix
+    index = np.empty((stop - start, k), dtype=np.intp)
+    index[0] = np.arange(k)
+    if start:  # no hold ends at step 0
+        index[0] += k * np.add.reduce(ends <= start, axis=0, dtype=np.intp)
+    rows, cols = np.nonzero((ends > start) & (ends < stop))
+    if rows.size:
+        index[1:] = 0
+        index[ends[rows, cols] - start, cols] = k
+        _accumulate_rows(index)
+    else:  # no hold ends in the block (a reset's first block, on every env)
+        index[1:] = index[0]
+    refs = np.empty((channels, stop - start, k)) if out is None else out
+    for c in range(channels):  # mode "clip" (indices are in range) writes without buffering
+        level = 2.0 * uniforms[count + c : count + (live + 1) * channels : channels] - 1.0
+        level *= amplitude[c]  # hold h's row is count + h channels + c
+        np.take(level, index, out=refs[c], mode="clip")
+    return refs
 
 
 @cache
@@ -254,7 +276,9 @@ def unit_normals(uniforms: np.ndarray) -> np.ndarray:
     return normal_rows(uniforms, uniforms.shape[0] // 2, 0, uniforms.shape[0])
 
 
-def normal_rows(uniforms: Uniforms, half: int, start: int, stop: int) -> np.ndarray:
+def normal_rows(
+    uniforms: Uniforms, half: int, start: int, stop: int, out: np.ndarray | None = None
+) -> np.ndarray:
     """Rows [start, stop) of ``unit_normals(uniforms[: 2 half])``, (stop - start, ...) float32,
     from the uniforms they pair alone: row i < half is ``R(u_i) cos(2 pi u_half+i)``, row
     half + i is ``R(u_i) sin(2 pi u_half+i)``, ``R(u) = sqrt(-2 log(1 - u))``.
@@ -262,13 +286,14 @@ def normal_rows(uniforms: Uniforms, half: int, start: int, stop: int) -> np.ndar
     Elementwise float32 work on contiguous copies (numpy's SIMD loops then give every element
     the same bits wherever it sits): an env drawn alone gets the same bits as in a batch, and a
     block of rows the same bits as the whole. Cosine and sine rows of overlapping pairs share
-    their radii and angles."""
+    their radii and angles. Written into ``out`` where given."""
     parts = []  # (wave, first pair, end pair), in row order
     if start < half:
         parts.append((np.cos, start, min(stop, half)))
     if stop > half:
         parts.append((np.sin, max(start, half) - half, stop - half))
-    out = np.empty((stop - start, *uniforms.shape[1:]), dtype=np.float32)
+    if out is None:
+        out = np.empty((stop - start, *uniforms.shape[1:]), dtype=np.float32)
     lo, hi = min(p[1] for p in parts), max(p[2] for p in parts)
     shared = _radius_and_angle(uniforms, half, lo, hi) if _overlap(parts) else None
     row = 0
@@ -282,11 +307,15 @@ def normal_rows(uniforms: Uniforms, half: int, start: int, stop: int) -> np.ndar
     return out
 
 
-def normal_pairs(uniforms: Uniforms, half: int, start: int, stop: int) -> np.ndarray:
+def normal_pairs(
+    uniforms: Uniforms, half: int, start: int, stop: int, out: np.ndarray | None = None
+) -> np.ndarray:
     """The cosine and sine normals of the pairs [start, stop): rows [start, stop) and [half +
     start, half + stop) of ``unit_normals(uniforms[: 2 half])`` (see :func:`normal_rows`), (2,
-    stop - start, ...) float32, each pair's radius and angle computed once."""
-    out = np.empty((2, stop - start, *uniforms.shape[1:]), dtype=np.float32)
+    stop - start, ...) float32 (written into ``out`` where given), each pair's radius and angle
+    computed once."""
+    if out is None:
+        out = np.empty((2, stop - start, *uniforms.shape[1:]), dtype=np.float32)
     radius, angle = _radius_and_angle(uniforms, half, start, stop)
     _waves(np.cos, radius, angle, out[0])
     _waves(np.sin, radius, angle, out[1])

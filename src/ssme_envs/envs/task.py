@@ -113,6 +113,10 @@ class Uniforms(Protocol):
     def __getitem__(self, rows: slice) -> np.ndarray: ...
 
 
+# where a task's ``episodes`` writes a block: references (None: shared, not written) and noise
+Blocks = tuple[np.ndarray | None, np.ndarray]
+
+
 @runtime_checkable
 class TrackingTask(Protocol):
     """What the scalar env (:class:`~ssme_envs.envs.tracking_env.TrackingEnv`) and the vector env
@@ -123,9 +127,11 @@ class TrackingTask(Protocol):
     ``initial_state(n, plants)`` gets them (plant_draw_size, n) and puts the drawn plant in the
     state. ``episodes(uniforms, start, stop)`` turns them (draw_size, k; a :class:`Uniforms`, read
     in row slices) into the references and unit sensor noise of steps [start, stop), (channels,
-    stop - start, k) each, equal to the same steps of the whole episode. The envs ask for the
-    steps as episodes reach them (:func:`next_stop`), so that a reset costs the same whatever the
-    episode's length.
+    stop - start, k) each, equal to the same steps of the whole episode, and returns them; given
+    ``out``, a pair of such arrays (references None where they are shared), it writes them there
+    (the vector env passes views of its tables, sparing a copy and the fresh memory of a block of
+    every env). The envs ask for the steps as episodes reach them (:func:`next_stop`), so that a
+    reset costs the same whatever the episode's length.
     ``step(state, action, t, ref, noise, ops)``: ``action``, ``ref`` and ``noise`` per channel
     (floats, or rows of N envs; noise float64), ``t`` the step index after the step; returns
     (state, observation values in the layout's order, reward, terminated). A task whose
@@ -151,7 +157,9 @@ class TrackingTask(Protocol):
     @property
     def shared_references(self) -> np.ndarray | None: ...
 
-    def episodes(self, uniforms: Uniforms, start: int, stop: int) -> tuple[np.ndarray, np.ndarray]: ...
+    def episodes(
+        self, uniforms: Uniforms, start: int, stop: int, out: Blocks | None = None
+    ) -> tuple[np.ndarray, np.ndarray]: ...
 
     def initial_state(self, n: int | None = None, plants: np.ndarray | None = None) -> tuple: ...
 
@@ -246,6 +254,7 @@ __all__ = [
     "GATHER",
     "MAX_EPISODE_SECONDS",
     "SYNCED",
+    "Blocks",
     "Carrier",
     "Observation",
     "Schedule",

@@ -205,12 +205,12 @@ class TrackingVectorEnv(VectorEnv):
         ``envs``, whose first ``start`` steps are computed, written into the tables; returned
         (channels, steps, len(envs))."""
         stop = next_stop(start, self.task.horizon + 1)
-        refs, noise = self.task.episodes(self._draws.uniforms(envs), start, stop)
-        if len(envs) == self.num_envs:  # every episode (envs is then 0..N-1): slices
-            self._noise[:, start:stop] = noise
-            if self._refs is not None:
-                self._refs[:, start:stop] = refs
-        else:  # one flat index per channel: numpy's fast path, where [:, slice, envs] is its slow one
+        uniforms = self._draws.uniforms(envs)
+        if len(envs) == self.num_envs:  # every episode (envs is then 0..N-1): into the tables
+            refs = None if self._refs is None else self._refs[:, start:stop]
+            refs, noise = self.task.episodes(uniforms, start, stop, (refs, self._noise[:, start:stop]))
+        else:  # written through one flat index per channel: numpy's fast path ([:, slice, envs]: slow)
+            refs, noise = self.task.episodes(uniforms, start, stop)
             flat = np.arange(start * self.num_envs, stop * self.num_envs, self.num_envs)[:, None] + envs
             for table, block in ((self._noise, noise), (self._refs, refs)):
                 for c in range(0 if table is None else len(table)):
