@@ -105,3 +105,28 @@ def test_a_toy_task_makes_checked_scalar_and_vector_envs():
     finally:
         catalogue.ENVS.pop(TOY.id, None)
         gym.envs.registration.registry.pop(TOY.id, None)
+
+
+@dataclass(frozen=True)
+class ToyOwnArrays(ToyTask):
+    """The toy with an ``episodes`` that leaves ``out`` alone and returns arrays of its own."""
+
+    def episodes(self, uniforms: np.ndarray, start: int, stop: int, out: Blocks | None = None) -> tuple:
+        return super().episodes(uniforms, start, stop)
+
+
+def test_a_task_that_returns_its_own_arrays_is_copied_into_the_tables():
+    from ssme_envs.envs.vector import TrackingVectorEnv
+
+    envs = [
+        type(task.__name__, (TrackingVectorEnv,), {"build_task": task.build})(num_envs=4)
+        for task in (ToyTask, ToyOwnArrays)
+    ]
+    first = [env.reset(seed=3)[0] for env in envs]
+    np.testing.assert_array_equal(*first)
+    assert np.abs(first[0][:, 1]).max() > 0  # the references reached the observations
+    rng = np.random.default_rng(1)
+    for _ in range(80):
+        actions = rng.uniform(-1, 1, (4, 1))
+        for x, y in zip(*(env.step(actions)[:4] for env in envs), strict=True):
+            np.testing.assert_array_equal(x, y)

@@ -207,8 +207,11 @@ class TrackingVectorEnv(VectorEnv):
         stop = next_stop(start, self.task.horizon + 1)
         uniforms = self._draws.uniforms(envs)
         if len(envs) == self.num_envs:  # every episode (envs is then 0..N-1): into the tables
-            refs = None if self._refs is None else self._refs[:, start:stop]
-            refs, noise = self.task.episodes(uniforms, start, stop, (refs, self._noise[:, start:stop]))
+            out = (None if self._refs is None else self._refs[:, start:stop], self._noise[:, start:stop])
+            refs, noise = self.task.episodes(uniforms, start, stop, out)
+            for table, block in zip(out, (refs, noise), strict=True):  # a task that made its own
+                if table is not None and not np.may_share_memory(table, block):
+                    table[...] = block
         else:  # written through one flat index per channel: numpy's fast path ([:, slice, envs]: slow)
             refs, noise = self.task.episodes(uniforms, start, stop)
             flat = np.arange(start * self.num_envs, stop * self.num_envs, self.num_envs)[:, None] + envs
