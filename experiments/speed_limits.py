@@ -33,7 +33,7 @@ from ssme_envs.envs.episode_draws import EpisodeDraws
 from ssme_envs.envs.launcher_pitch import LauncherTask
 from ssme_envs.envs.nozzle_task import NozzleTask
 from ssme_envs.envs.task import FLOATS
-from ssme_envs.models import engine_step, nozzle_joint
+from ssme_envs.models import nozzle_joint
 from ssme_envs.models.nozzle import rk4_arrays, rk4_floats, rk4_parameters
 from ssme_envs.outputs import write_text
 
@@ -184,7 +184,6 @@ def main() -> None:
         run, close = bench._vector_stepper("CartPole-v1", N, kind)
         cartpole[kind] = _best(run, 500, rounds)
         close()
-    compiled = nozzle_joint.KERNEL == "compiled"
     lines = [
         "# Speed floors and the env contract",
         "",
@@ -195,11 +194,7 @@ def main() -> None:
         "",
         f"Pendulum-v1 step (through `gymnasium.make`): {pendulum * 1e6:.2f} us. CartPole-v1's "
         f"native vector env, N = {N}: {cartpole['zero'] * 1e6:.0f} us per step (zero actions), "
-        f"{cartpole['random'] * 1e6:.0f} us (random actions). The joint's RK4 runs "
-        f"{'the compiled kernel' if compiled else 'the Python reference (no kernel built)'}, the "
-        f"engine's float step {'its' if engine_step.KERNEL == 'compiled' else 'no'} compiled kernel, the "
-        f"vector envs' episode draws {'their' if episode_draws.KERNEL == 'compiled' else 'no'} "
-        "compiled kernel.",
+        f"{cartpole['random'] * 1e6:.0f} us (random actions). {bench.kernels_used()}",
         "",
         "The joint's RK4 over one env step (its RK4 steps, a power |w|^n per stage), on one nozzle "
         "and on N nozzles, as the package runs it and as its Python reference (numpy on "

@@ -44,7 +44,7 @@ def evaluate_choices() -> str:
 
 
 def bench_command(args: argparse.Namespace) -> int:
-    from ssme_envs.bench import ACTIONS, ENV_IDS, format_table, run_benchmark
+    from ssme_envs.bench import ACTIONS, ENV_IDS, format_table, kernels_used, run_benchmark
 
     try:
         sizes = list(positive_integers("--sizes", args.sizes))
@@ -65,17 +65,7 @@ def bench_command(args: argparse.Namespace) -> int:
     rows = run_benchmark(env_ids, sizes, args.rounds, progress=_to_stderr, actions=actions)
     table = format_table(rows)
     print(table)
-    from ssme_envs.envs import episode_draws
-    from ssme_envs.models import engine_step, nozzle_joint
-
-    ran = {"compiled": "compiled kernel", "python": "Python reference"}
-    batch = "compiled kernel" if engine_step.has_batch(engine_step._KERNEL) else "numpy reference"
-    draws = {"compiled": "compiled kernel", "python": "numpy generators (whole episodes)"}
-    joint = (
-        f"The nozzle joint ran its {ran[nozzle_joint.KERNEL]}, "
-        f"the engine's float step its {ran[engine_step.KERNEL]}, its batch step its {batch}; "
-        f"the vector envs' episode draws their {draws[episode_draws.KERNEL]}."
-    )
+    joint = kernels_used()
     print(joint)
     if args.out is not None:
         write_text(args.out, "Command: `ssme-envs bench`\n\n" + table + "\n\n" + joint + "\n")

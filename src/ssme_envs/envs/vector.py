@@ -216,8 +216,9 @@ class TrackingVectorEnv(VectorEnv):
             refs, noise = self.task.episodes(uniforms, start, stop)
             flat = np.arange(start * self.num_envs, stop * self.num_envs, self.num_envs)[:, None] + envs
             for table, block in ((self._noise, noise), (self._refs, refs)):
-                for c in range(0 if table is None else len(table)):
-                    table[c].reshape(-1)[flat] = block[c]
+                if table is not None:
+                    for channel, values in zip(table, block, strict=True):
+                        channel.reshape(-1)[flat] = values
         self._ready[envs] = stop
         self._ready_min = int(self._ready.min())
         return refs, noise
