@@ -191,6 +191,8 @@ def set_columns(state: Any, fresh: Any, envs: np.ndarray) -> None:
     for block, new in zip(state, fresh, strict=True):
         if isinstance(block, tuple):
             set_columns(block, new, envs)
+        elif isinstance(block, np.ndarray) and block.ndim == 1:
+            block[envs] = new  # numpy's fast path of one index (``[..., envs]`` takes its general one)
         elif isinstance(block, np.ndarray):
             block[..., envs] = new
 

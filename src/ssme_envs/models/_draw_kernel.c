@@ -40,6 +40,12 @@ typedef struct {
 
 #define MULTIPLIER (((u128)2549297995355413924ULL << 64) + 4865540595714422341ULL)
 
+#if defined(__GNUC__) || defined(__clang__)
+#define PREFETCH(address) __builtin_prefetch(address)
+#else
+#define PREFETCH(address) ((void)(address))
+#endif
+
 enum { ORIGIN = 6, TILE = 16 }; /* an origin: state low, high; inc low, high; has_uint32; uinteger */
 
 /* the jump of n LCG steps: s_n = mult s + sum inc */
@@ -103,6 +109,7 @@ static PyObject *start(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     }
     Views v = {.count = 0};
     PyObject *result = NULL;
+    void **link = NULL;
     Py_ssize_t k, words, n = PyList_GET_SIZE(bitgens);
     uint64_t *origins = take(&v, args[3], 8, "QLK", -1, 1, "origins", &words);
     const int64_t *envs = origins == NULL ? NULL : env_indices(&v, args[1], n, &k);
@@ -112,19 +119,42 @@ static PyObject *start(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
         PyErr_Format(PyExc_ValueError, "origins: %d words per generator expected", ORIGIN);
         goto done;
     }
-    for (Py_ssize_t j = 0; j < k; j++)
-        if (!PyCapsule_IsValid(PyList_GET_ITEM(bitgens, envs[j]), "BitGenerator")) {
+    /* Each env's state lies at the end of a chain of scattered objects (capsule, bitgen,
+     * PCG64 state, LCG), cold in cache when hundreds of envs restart. The chains are followed
+     * one link per pass over every env, each link's loads prefetched by the pass before, so that
+     * the misses of many envs overlap instead of one env waiting on four in turn. */
+    link = k == 0 ? NULL : PyMem_Malloc((size_t)k * sizeof(void *));
+    if (k > 0 && link == NULL) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    for (Py_ssize_t j = 0; j < k; j++) {
+        link[j] = PyList_GET_ITEM(bitgens, envs[j]);
+        PREFETCH(link[j]);
+    }
+    for (Py_ssize_t j = 0; j < k; j++) { /* every capsule checked before a generator moves */
+        if (!PyCapsule_IsValid(link[j], "BitGenerator")) {
             PyErr_SetString(PyExc_TypeError, "start: bitgens holds a non-BitGenerator capsule");
             goto done;
         }
+        link[j] = PyCapsule_GetPointer(link[j], "BitGenerator");
+        PREFETCH(link[j]);
+    }
+    for (Py_ssize_t j = 0; j < k; j++) {
+        link[j] = ((BitGen *)link[j])->state;
+        PREFETCH(link[j]);
+    }
+    for (Py_ssize_t j = 0; j < k; j++) {
+        PREFETCH(((Pcg64 *)link[j])->lcg);
+        PREFETCH(origins + ORIGIN * envs[j]);
+    }
     /* the outputs a draw takes: all `count` from new outputs, or the first from the buffer */
     uint64_t fresh[2] = {(uint64_t)count, count > 0 ? (uint64_t)count - 1 : 0};
     u128 mult[2], sum[2];
     for (int h = 0; h < 2; h++)
         jump_of((fresh[h] + 1) / 2, &mult[h], &sum[h]);
     for (Py_ssize_t j = 0; j < k; j++) {
-        BitGen *bg = PyCapsule_GetPointer(PyList_GET_ITEM(bitgens, envs[j]), "BitGenerator");
-        Pcg64 *g = bg->state;
+        Pcg64 *g = link[j];
         uint64_t *o = origins + ORIGIN * envs[j];
         const int h = g->has_uint32 != 0;
         o[0] = (uint64_t)g->lcg->state;
@@ -145,6 +175,7 @@ static PyObject *start(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     }
     result = Py_NewRef(Py_None);
 done:
+    PyMem_Free(link);
     release(&v);
     return result;
 }
