@@ -1,6 +1,6 @@
 """Which engine models an engine env is built from: the truth's effects (a TruthConfig from one or
-from a dict), the point model behind ``plant=`` ("truth", "identified", a model.json or a model)
-and the linear model its controllers are designed on at a power level. These are choices made once
+from a dict), the point model behind ``plant=`` ("truth", "identified", a model.json or a model),
+checked to be one the envs can step, with the episode's steps at its sample time, and the linear model its controllers are designed on at a power level. These are choices made once
 when an env is built, kept apart from the task that steps the chosen plant every sample."""
 
 from __future__ import annotations
@@ -10,7 +10,15 @@ from pathlib import Path
 from typing import Any
 
 from ssme_envs.envs.task import check_number, check_numbers
-from ssme_envs.models.engine import POWER_LEVELS, TruthConfig, identified_model, published_model
+from ssme_envs.models.engine import (
+    POWER_LEVELS,
+    TruthConfig,
+    check_plant_gain,
+    check_stable_plant,
+    identified_model,
+    output_coupling,
+    published_model,
+)
 from ssme_envs.models.linked import POWER_RANGE, LinkedEngineModel
 from ssme_envs.models.statespace import AlphaCanonicalModel
 
@@ -76,6 +84,46 @@ def resolve_plant(plant: str | Path | AlphaCanonicalModel, power: float) -> Alph
     raise ValueError(
         f"plant must be 'truth', 'identified', 'nonlinear', a model.json path or a model, got {plant!r}"
     )
+
+
+def env_plant(plant: str | Path | AlphaCanonicalModel, power: float) -> AlphaCanonicalModel:
+    """:func:`resolve_plant`, checked to be a plant the engine envs step: 2 inputs (OPOV, FPOV)
+    and 2 outputs (Pc, MR) that are its last two states, stable, with a bounded gain; else
+    ValueError naming what is wrong."""
+    model = resolve_plant(plant, power)
+    if model.n_inputs != 2 or model.n_outputs != 2:
+        raise ValueError(
+            "plant must have 2 inputs (OPOV, FPOV) and 2 outputs (Pc, MR), "
+            f"got {model.n_inputs} and {model.n_outputs}"
+        )
+    if output_coupling(model) is not None:
+        raise ValueError(
+            "plant couples its outputs (C = H [0 I] with H != I, indices "
+            f"{list(model.observability_indices)}): the engine environments step models whose "
+            "outputs are their last two states; identify with --indices 2,2"
+        )
+    check_stable_plant(model)
+    check_plant_gain(model)
+    return model
+
+
+# the sample times an engine model.json may have: the references hold levels for whole seconds
+# (at least 2 steps each up to 0.5 s; round(1 / dt) is 0 from 2 s), and an episode's draws and
+# tables grow with its steps (1e-9 s asked 74 GiB at reset); the packaged models have 0.04 s
+MIN_DT, MAX_DT = 1e-3, 0.5
+MAX_EPISODE_STEPS = 1_000_000  # the longest episodes (MAX_EPISODE_SECONDS) down to dt = 3.6 ms
+
+
+def episode_steps(dt: float, episode_seconds: float) -> int:
+    """The steps of an episode of ``episode_seconds`` at the plant's ``dt`` (s), or ValueError
+    when dt is outside MIN_DT-MAX_DT or the episode over MAX_EPISODE_STEPS steps."""
+    # dt out of range first: round() of an episode over a tiny dt would overflow
+    if not MIN_DT <= dt <= MAX_DT or round(episode_seconds / dt) > MAX_EPISODE_STEPS:
+        raise ValueError(
+            f"plant dt must be within {MIN_DT:g}-{MAX_DT:g} s and an episode (episode_seconds / dt) "
+            f"at most {MAX_EPISODE_STEPS} steps, got dt={dt:g} s for {episode_seconds:g} s"
+        )
+    return round(episode_seconds / dt)
 
 
 def design_model(power: float, source: str = "identified") -> AlphaCanonicalModel:

@@ -10,7 +10,7 @@ from typing import Any, ClassVar, NamedTuple
 import numpy as np
 
 from ssme_envs.envs import engine_compiled
-from ssme_envs.envs.engine_models import design_model, resolve_plant, resolve_truth
+from ssme_envs.envs.engine_models import design_model, env_plant, episode_steps, resolve_plant, resolve_truth
 from ssme_envs.envs.engine_nonlinear_plant import NonlinearPlantCore, nonlinear_engine_of, nonlinear_task
 from ssme_envs.envs.references import (
     Fault,
@@ -31,7 +31,7 @@ from ssme_envs.envs.task import (
     check_numbers,
 )
 from ssme_envs.models import engine_step
-from ssme_envs.models.engine import TruthConfig, check_plant_gain, check_stable_plant, output_coupling
+from ssme_envs.models.engine import TruthConfig
 from ssme_envs.models.engine_nonlinear import NonlinearEngine
 from ssme_envs.models.engine_step import (
     StepParameters,
@@ -48,12 +48,6 @@ ENGINE_OBSERVATION = Observation(
     units=("%", "%", "%", "%", "%", "%", "% s", "% s", "-", "-"),
     high=(50.0, 50.0, 50.0, 50.0, 100.0, 100.0, 100.0, 100.0, 1.0, 1.0),
 )  # fmt: skip
-
-# the sample times an engine model.json may have: the references hold levels for whole seconds
-# (at least 2 steps each up to 0.5 s; round(1 / dt) is 0 from 2 s), and an episode's draws and
-# tables grow with its steps (1e-9 s asked 74 GiB at reset); the packaged models have 0.04 s
-MIN_DT, MAX_DT = 1e-3, 0.5
-MAX_EPISODE_STEPS = 1_000_000  # the longest episodes (MAX_EPISODE_SECONDS) down to dt = 3.6 ms
 
 
 class EnginePlant(NamedTuple):
@@ -140,37 +134,18 @@ class EngineTask:
                                reference_amplitude=reference_amplitude, episode_seconds=episode_seconds,
                                action_scale=action_scale)  # fmt: skip
             return nonlinear_task(linear, engine, resolve_truth(truth).asymmetric_gains)
-        model = resolve_plant(plant, power)
-        if model.n_inputs != 2 or model.n_outputs != 2:
-            raise ValueError(
-                "plant must have 2 inputs (OPOV, FPOV) and 2 outputs (Pc, MR), "
-                f"got {model.n_inputs} and {model.n_outputs}"
-            )
-        if output_coupling(model) is not None:
-            raise ValueError(
-                "plant couples its outputs (C = H [0 I] with H != I, indices "
-                f"{list(model.observability_indices)}): the engine environments step models whose "
-                "outputs are their last two states; identify with --indices 2,2"
-            )
-        check_stable_plant(model)
-        check_plant_gain(model)
+        model = env_plant(plant, power)
         config = resolve_truth(truth)
         check_reference(reference)
         amplitude = check_numbers("reference_amplitude", reference_amplitude, 2, 0.0, 0.05)
         episode_seconds = check_number("episode_seconds", episode_seconds, 1.0, MAX_EPISODE_SECONDS)
         action_scale = check_number("action_scale", action_scale, 0.0, 0.2, low_open=True)
         noise = np.array(config.sensor_noise, dtype=float)  # two, checked by resolve_truth
-        # dt out of range first: round() of an episode over a tiny dt would overflow
-        if not MIN_DT <= model.dt <= MAX_DT or round(episode_seconds / model.dt) > MAX_EPISODE_STEPS:
-            raise ValueError(
-                f"plant dt must be within {MIN_DT:g}-{MAX_DT:g} s and an episode (episode_seconds / dt) "
-                f"at most {MAX_EPISODE_STEPS} steps, got dt={model.dt:g} s for {episode_seconds:g} s"
-            )
         return cls(
             params=StepParameters.from_model(model, config),
             n_states=model.A.shape[0],
             dt=model.dt,
-            horizon=round(episode_seconds / model.dt),
+            horizon=episode_steps(model.dt, episode_seconds),
             action_scale=action_scale,
             amplitude=amplitude,
             reference=reference,
