@@ -21,12 +21,14 @@ class BuildExt(build_ext):
         super().build_extensions()
 
 
+HEADERS = ("_buffers.h", "_joint_arithmetic.h", "_engine_arithmetic.h")  # included by the kernels
+
 setup(
     ext_modules=[
         Extension(
             f"ssme_envs.models.{name}",
             [f"src/ssme_envs/models/{name}.c"],
-            depends=["src/ssme_envs/models/_buffers.h"],
+            depends=[f"src/ssme_envs/models/{header}" for header in HEADERS],
             optional=True,
         )
         for name in ("_joint_kernel", "_engine_kernel", "_draw_kernel")

@@ -1,7 +1,8 @@
 """Which engine models an engine env is built from: the truth's effects (a TruthConfig from one or
 from a dict), the point model behind ``plant=`` ("truth", "identified", a model.json or a model),
-checked to be one the envs can step, with the episode's steps at its sample time, and the linear model its controllers are designed on at a power level. These are choices made once
-when an env is built, kept apart from the task that steps the chosen plant every sample."""
+checked to be one the envs can step, with the episode's steps at its sample time, and the linear
+model its controllers are designed on at a power level. These are choices made once when an env
+is built, kept apart from the task that steps the chosen plant every sample."""
 
 from __future__ import annotations
 

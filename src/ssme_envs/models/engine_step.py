@@ -242,14 +242,14 @@ def pair_step_reference(
 
 
 # The batch kernels (plant_batch, task_batch: N engines state-major, stepped in place) take the
-# task's numbers as one float64 array, these entries in this order (_engine_kernel.c's enum).
+# task's numbers as one float64 array, these entries in this order (_engine_arithmetic.h's enum).
 BATCH_CONFIG = (
     "scale", "s0", "s1", "dt", "limit", "error_weight", "rate_weight", "envelope", "cost_bound", "horizon",
     "fault_kind", "fault_index", "magnitude", "fault_step", "half", "stick", "width", "scheduled",
 )  # fmt: skip
 
 
-# the batch kernels' fault codes (its fault_kind entry; _engine_kernel.c's enum)
+# the batch kernels' fault codes (its fault_kind entry; _engine_arithmetic.h's enum)
 FAULT_CODES = {None: 0, "stuck_valve": 1, "gain_loss": 2, "sensor_bias": 3}
 
 
