@@ -65,10 +65,10 @@ def bench_command(args: argparse.Namespace) -> int:
     rows = run_benchmark(env_ids, sizes, args.rounds, progress=_to_stderr, actions=actions)
     table = format_table(rows)
     print(table)
-    joint = kernels_used()
-    print(joint)
+    kernels = kernels_used()
+    print(kernels)
     if args.out is not None:
-        write_text(args.out, "Command: `ssme-envs bench`\n\n" + table + "\n\n" + joint + "\n")
+        write_text(args.out, "Command: `ssme-envs bench`\n\n" + table + "\n\n" + kernels + "\n")
     return 0
 
 

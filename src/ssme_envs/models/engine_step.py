@@ -306,19 +306,20 @@ def _kernel_agrees(kernel: Any) -> bool:
     rows = ((-1, 0.31, -0.2, 0.05, 1e-3), (0, -0.4, 0.9, -0.0, 0.2), (-1, 1.7, 0.25, 0.3, -0.6),
             (2, 0.05, -0.8, 2.0, 0.01))  # fmt: skip
     lam = (0.125, -0.3)
+    dead_bands = ((0.0, 0.0), (1e-3, 0.0), (0.0, 2e-3), (1e-3, 2e-3))  # half backlash, stiction: off, on
     for width in (5, 6):
         table_rows = rows if width == 5 else tuple((*row, 0.25 * i - 0.5) for i, row in enumerate(rows))
         table, _ = pair_table([((0.0, 0.0), table_rows), (lam, table_rows)])
         for k, x in enumerate(states):
             for c0, c1 in zip(special, special[::-1]):
-                for half, stick in ((0.0, 0.0), (1e-3, 0.0), (0.0, 2e-3), (1e-3, 2e-3)):
+                for half, stick in dead_bands:
                     args = (x, (0.01, -0.0), (-0.02, 0.004), c0, c1, 0.1 * k, -0.2 * k, half, stick)
                     got = kernel.pair_step(*args, table, width, 1)
                     want = pair_step_reference(*args, lam, table_rows)
                     if not _same_bits(got, want):
                         return False
             commands = list(zip(special, special[::-1]))  # every pair above, one env each
-            for half, stick in ((0.0, 0.0), (1e-3, 0.0), (0.0, 2e-3), (1e-3, 2e-3)):
+            for half, stick in dead_bands:
                 batch = (x, lam, table_rows, table, width, k, commands, half, stick)
                 if has_batch(kernel) and not _batch_agrees(kernel, *batch):
                     return False
