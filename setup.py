@@ -21,7 +21,8 @@ class BuildExt(build_ext):
         super().build_extensions()
 
 
-HEADERS = ("_buffers.h", "_joint_arithmetic.h", "_engine_arithmetic.h")  # included by the kernels
+# included by the kernels
+HEADERS = ("_buffers.h", "_joint_arithmetic.h", "_engine_arithmetic.h", "_draw_streams.h")
 
 setup(
     ext_modules=[

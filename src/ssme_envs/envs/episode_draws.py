@@ -91,6 +91,16 @@ class EpisodeDraws:
         """``"origins"`` or ``"table"`` (see the module docs)."""
         return "table" if self._origins is None else "origins"
 
+    @property
+    def origins(self) -> np.ndarray | None:
+        """The episodes' origins, (N, ORIGIN_WORDS) uint64, in the origins form (else None)."""
+        return self._origins
+
+    @property
+    def table(self) -> np.ndarray | None:
+        """The episodes' whole draws, (N, size) float32, in the table form (else None)."""
+        return self._table
+
     def _use_table(self, table: np.ndarray) -> None:
         self._origins = None
         self._table = table

@@ -106,6 +106,7 @@ class LauncherTask:
     draw_size = _from_nozzle("draw_size", "Uniform float32 numbers one episode consumes.")
     plant_draw_size = _from_nozzle("plant_draw_size", "The last uniforms of a draw, which draw the joint.")
     shared_references = _from_nozzle("shared_references", "None: references are drawn per episode.")
+    stream_layout = _from_nozzle("stream_layout", "Where a step's noise and reference lie in the draw.")
     rk4_params = _from_nozzle("rk4_params", "The joint's integrator parameters.")
 
     @classmethod

@@ -12,7 +12,14 @@ import gymnasium as gym
 import numpy as np
 
 from ssme_envs.envs.plant_spread import PlantSpread, covered_joints, resolve_spread
-from ssme_envs.envs.references import Fault, check_reference, normal_rows, reference_signals, uniforms_needed
+from ssme_envs.envs.references import (
+    Fault,
+    StreamLayout,
+    check_reference,
+    normal_rows,
+    reference_signals,
+    uniforms_needed,
+)
 from ssme_envs.envs.task import (
     MAX_EPISODE_SECONDS,
     SYNCED,
@@ -264,6 +271,14 @@ class NozzleTask:
         return (
             length + length % 2 + uniforms_needed(self.reference, length, 1, self.dt) + self.plant_draw_size
         )
+
+    @property
+    def stream_layout(self) -> StreamLayout | None:
+        """Where a step's noise and reference lie in the draw, for the vector env to make each
+        step's alone (:mod:`~ssme_envs.envs.episode_streams`): random_steps references only."""
+        if self.reference != "random_steps":
+            return None
+        return StreamLayout.random_steps(self.horizon + 1, self.dt, float(self.amplitude[0]))
 
     def episodes(
         self, uniforms: Uniforms, start: int, stop: int, out: Blocks | None = None

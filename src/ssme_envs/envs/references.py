@@ -11,7 +11,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass
 from functools import cache
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -54,6 +54,33 @@ def uniforms_needed(kind: str, length: int, channels: int, dt: float) -> int:
 
 def _hold_count(length: int, dt: float) -> int:
     return -(-length // round(1.0 / dt))  # holds of at least 1 s cover the episode
+
+
+def _hold_steps(dt: float) -> tuple[int, int]:
+    """The shortest and longest hold of random_steps, in steps: 1 s and 3 s."""
+    return round(1.0 / dt), round(3.0 / dt)
+
+
+class StreamLayout(NamedTuple):
+    """Where one step's unit noise and random_steps reference lie in a one-channel episode's
+    draw, so that a step's values can be made alone (:mod:`ssme_envs.envs.episode_streams`):
+    noise row t is row t of ``normal_rows(draw, half, ...)``; the reference's ``holds`` hold
+    lengths are the uniforms at ``refs_at``, ``shortest + floor(u (longest - shortest + 1))``
+    steps each, and their levels the next ``holds``, ``(2 u - 1) amplitude``."""
+
+    half: int
+    refs_at: int
+    holds: int
+    shortest: int
+    longest: int
+    amplitude: float
+
+    @classmethod
+    def random_steps(cls, length: int, dt: float, amplitude: float) -> StreamLayout:
+        """The layout of an episode of ``length`` steps drawn as the nozzle task draws it: the
+        noise's Box-Muller pairs (``length`` rounded up to even), then the reference's uniforms."""
+        pairs = length + length % 2
+        return cls(pairs // 2, pairs, _hold_count(length, dt), *_hold_steps(dt), amplitude)
 
 
 def reference_signals(
@@ -157,7 +184,7 @@ def _random_steps(
     """:func:`reference_signals`' random_steps, into ``out`` if given."""
     k, channels = uniforms.shape[1], amplitude.size
     count = _hold_count(length, dt)
-    shortest, longest = round(1.0 / dt), round(3.0 / dt)
+    shortest, longest = _hold_steps(dt)
     # hold j ends at step (j + 1) shortest or later: only the first `live` can end in the block
     live = min(count, (stop - 1) // shortest)
     ends = shortest + np.floor(uniforms[:live] * (longest - shortest + 1)).astype(np.intp)

@@ -26,11 +26,12 @@ from gymnasium.vector.utils import batch_space
 from ssme_envs.envs.engine_task import EngineTask
 from ssme_envs.envs.engine_throttle import ThrottleTask
 from ssme_envs.envs.episode_draws import EpisodeDraws
+from ssme_envs.envs.episode_streams import EpisodeSource, episode_source
 from ssme_envs.envs.inputs import batch_actions, check_seeds, check_vector_memory, positive_int
 from ssme_envs.envs.launcher_pitch import LauncherTask
 from ssme_envs.envs.nozzle_task import NozzleTask
 from ssme_envs.envs.sub_env import SubEnv, reset_mask, sub_env_index
-from ssme_envs.envs.task import CLIP_UFUNC, GATHER, SYNCED, next_stop, set_columns
+from ssme_envs.envs.task import CLIP_UFUNC, GATHER, SYNCED, set_columns
 from ssme_envs.envs.tracking_env import EpisodeOverError
 
 _FLOATS = (np.dtype(np.float32), np.dtype(np.float64))  # action dtypes clipped without a copy
@@ -113,25 +114,14 @@ class TrackingVectorEnv(VectorEnv):
         self._noise_as_drawn = getattr(self.task, "scales_float32_noise", False)
         # whether the task ends episodes whose step went non-finite (None: it passes them on)
         self._ends_nonfinite = self.task.nonfinite_reward(np.zeros(1, dtype=np.int64)) is not None
-        n, length, channels = num_envs, self.task.horizon + 1, self.task.n_channels
+        n = num_envs
         rngs, seeds = zip(*(seeding.np_random(None) for _ in range(n)), strict=True)
         self._seeds: list[int] = list(seeds)  # np_random_seed of each sub-env (-1: generator set directly)
         # each sub-env's episode draw, made as its episode reaches it (``episode_draws``)
         self._draws = EpisodeDraws(self.task.draw_size, rngs)
-        # Episode data with the env axis last: one step's values of every env are contiguous.
-        # References common to every episode (the throttle profile) are not stored per env.
-        shared = self.task.shared_references
-        self._shared_refs = None if shared is None else np.ascontiguousarray(shared.T)  # (channels, T + 1)
-        self._refs = None if shared is not None else np.zeros((channels, length, n))
-        self._noise = np.zeros((channels, length, n), dtype=np.float32)  # unit draws, scaled at each step
-        # how many of each episode's steps are computed into the tables: they are as the episode
-        # reaches them
-        self._ready = np.zeros(n, dtype=np.int64)
+        self._episodes: EpisodeSource = episode_source(self.task, self._draws)
         self._t = np.zeros(n, dtype=np.int64)
-        # bounds that spare most steps the (N,) comparison of t with _ready: no step reaches an
-        # uncomputed block while the largest t (bounded above) is below the smallest _ready
-        self._ready_min = 0
-        self._t_bound = 0
+        self._t_bound = 0  # at least the largest t: truncation and the tables' blocks skip most steps
         self._synced = True  # every env at the same step: reads are slices, not gathers
         self._rows = np.arange(n)
         self._state = self.task.initial_state(n)
@@ -180,48 +170,8 @@ class TrackingVectorEnv(VectorEnv):
         if k == self.num_envs:
             self._t_bound = 0
         self._synced = bool((self._t == self._t[0]).all())
-        self._ready[envs] = 0
-        refs, noise = self._compute(envs, 0)
-        obs = task.initial_observation(refs[:, 0], noise[:, 0]).T
+        obs = task.initial_observation(*self._episodes.restart(envs)).T
         return CLIP_UFUNC(obs, self._low, self._high)
-
-    def _extend(self, t: np.ndarray) -> None:
-        """Compute the next block of the episodes that reach their uncomputed steps at ``t``, and
-        of those of the same position within half a block of it: unsynced episodes (random
-        actions) reach a position a few at a step, and a block's numpy calls cost more than its
-        numbers, so that one call serves the next steps' arrivals too."""
-        self._t_bound = int(t.max())
-        late = np.flatnonzero(t >= self._ready)
-        starts = self._ready[late]
-        if starts[0] == starts[-1] and len(late) == self.num_envs:  # synced: every episode
-            self._compute(late, int(starts[0]))
-            return
-        for start in np.unique(starts).tolist():
-            ahead = (next_stop(start, self.task.horizon + 1) - start) // 2
-            self._compute(np.flatnonzero((self._ready == start) & (t >= start - ahead)), start)
-
-    def _compute(self, envs: np.ndarray, start: int) -> tuple[np.ndarray, np.ndarray]:
-        """The references and noise of the next block (:func:`next_stop`) of the episodes
-        ``envs``, whose first ``start`` steps are computed, written into the tables; returned
-        (channels, steps, len(envs))."""
-        stop = next_stop(start, self.task.horizon + 1)
-        uniforms = self._draws.uniforms(envs)
-        if len(envs) == self.num_envs:  # every episode (envs is then 0..N-1): into the tables
-            out = (None if self._refs is None else self._refs[:, start:stop], self._noise[:, start:stop])
-            refs, noise = self.task.episodes(uniforms, start, stop, out)
-            for table, block in zip(out, (refs, noise), strict=True):  # a task that made its own
-                if table is not None and not np.may_share_memory(table, block):
-                    table[...] = block
-        else:  # written through one flat index per channel: numpy's fast path ([:, slice, envs]: slow)
-            refs, noise = self.task.episodes(uniforms, start, stop)
-            flat = np.arange(start * self.num_envs, stop * self.num_envs, self.num_envs)[:, None] + envs
-            for table, block in ((self._noise, noise), (self._refs, refs)):
-                if table is not None:
-                    for channel, values in zip(table, block, strict=True):
-                        channel.reshape(-1)[flat] = values
-        self._ready[envs] = stop
-        self._ready_min = int(self._ready.min())
-        return refs, noise
 
     def reset(
         self, *, seed: int | Sequence[int | None] | None = None, options: Mapping[str, Any] | None = None
@@ -278,18 +228,7 @@ class TrackingVectorEnv(VectorEnv):
         if self._t_bound >= task.horizon:  # an env past its end (restarted below) stays at it
             np.minimum(t, task.horizon, out=t)
         self._t_bound = min(self._t_bound + 1, task.horizon)
-        if self._t_bound >= self._ready_min and (t >= self._ready).any():
-            self._extend(t)
-        if self._synced:  # contiguous slices
-            noise = self._noise[:, t[0]]
-            refs = self._refs[:, t[0]] if self._refs is not None else self._shared_refs[:, t[0], None]
-        else:  # one flat index for both tables: take is much faster than fancy indexing
-            flat = t * self.num_envs + self._rows
-            noise = np.take(self._noise.reshape(len(self._noise), -1), flat, axis=1)
-            if self._refs is None:
-                refs = np.take(self._shared_refs, t, axis=1)
-            else:
-                refs = np.take(self._refs.reshape(len(self._refs), -1), flat, axis=1)
+        refs, noise, self._t_bound = self._episodes.at(t, self._t_bound, self._synced)
         if not self._noise_as_drawn:
             noise = noise.astype(np.float64)
         self._state, values, reward, terminated = task.step(

@@ -266,9 +266,74 @@ done:
     return result;
 }
 
+#include "_draw_streams.h"
+
+/* streams(origins, envs, t, cursors, layout, amplitude, fresh, refs, radius, angle): for each env
+ * e = envs[j] at step t[j] >= 0, refs[j] <- its random_steps reference, radius[j] and angle[j] <-
+ * the uniforms of its Box-Muller noise (_draw_streams.h), reading and moving cursors[e]
+ * (STREAM_WORDS words; fresh: sought from the origin, as after a restart). layout = (half,
+ * refs_at, holds, shortest, longest). Returns how many t[j] >= half (their noise is a sine). */
+static PyObject *streams(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (nargs != 10) {
+        PyErr_SetString(PyExc_TypeError,
+                        "streams(origins, envs, t, cursors, layout, amplitude, fresh, refs, radius, angle)");
+        return NULL;
+    }
+    const double amplitude = PyFloat_AsDouble(args[5]);
+    const int fresh = PyObject_IsTrue(args[6]);
+    if ((amplitude == -1.0 && PyErr_Occurred()) || fresh < 0)
+        return NULL;
+    Views v = {.count = 0};
+    PyObject *result = NULL;
+    Py_ssize_t k, words, cursor_words;
+    const uint64_t *origins = take(&v, args[0], 8, "QLK", -1, 0, "origins", &words);
+    if (origins != NULL && words % ORIGIN != 0) {
+        PyErr_Format(PyExc_ValueError, "streams: origins of %d words each expected", ORIGIN);
+        goto done;
+    }
+    const Py_ssize_t n = words / ORIGIN;
+    const int64_t *envs = origins == NULL ? NULL : env_indices(&v, args[1], n, &k);
+    const int64_t *t = envs == NULL ? NULL : take(&v, args[2], 8, "qlL", k, 0, "t", NULL);
+    uint64_t *cursors = t == NULL ? NULL : take(&v, args[3], 8, "QLK", -1, 1, "cursors", &cursor_words);
+    const int64_t *layout = cursors == NULL ? NULL : take(&v, args[4], 8, "qlL", 5, 0, "layout", NULL);
+    double *refs = layout == NULL ? NULL : take(&v, args[7], 8, "d", k, 1, "refs", NULL);
+    float *radius = refs == NULL ? NULL : take(&v, args[8], 4, "f", k, 1, "radius", NULL);
+    float *angle = radius == NULL ? NULL : take(&v, args[9], 4, "f", k, 1, "angle", NULL);
+    if (angle == NULL)
+        goto done;
+    if (cursor_words != STREAM_WORDS * n) {
+        PyErr_Format(PyExc_ValueError, "streams: cursors of %d words per env expected", STREAM_WORDS);
+        goto done;
+    }
+    const Layout l = {layout[0], layout[1], layout[2], layout[3], layout[4], amplitude};
+    if (l.half < 1 || l.refs_at < 2 * l.half || l.holds < 1 || l.shortest < 1 || l.longest < l.shortest) {
+        PyErr_SetString(PyExc_ValueError, "streams: layout (half, refs_at, holds, shortest, longest) out of range");
+        goto done;
+    }
+    for (Py_ssize_t j = 0; j < k; j++)
+        if (t[j] < 0 || t[j] >= 2 * l.half) {
+            PyErr_Format(PyExc_ValueError, "streams: step %lld outside 0..%lld", (long long)t[j],
+                         (long long)(2 * l.half - 1));
+            goto done;
+        }
+    Jumps jumps = {.used = 0};
+    Py_ssize_t sines = 0;
+    for (Py_ssize_t j = 0; j < k; j++) {
+        stream_step(cursors + STREAM_WORDS * envs[j], origins + ORIGIN * envs[j], t[j], fresh, &l, &jumps,
+                    radius + j, angle + j, refs + j);
+        sines += t[j] >= l.half;
+    }
+    result = PyLong_FromSsize_t(sines);
+done:
+    release(&v);
+    return result;
+}
+
 static PyMethodDef methods[] = {
     {"start", (PyCFunction)(void (*)(void))start, METH_FASTCALL, "Record episodes' origins, move the generators on."},
     {"rows", (PyCFunction)(void (*)(void))rows, METH_FASTCALL, "Numbers [lo, hi) of episodes from their origins."},
+    {"streams", (PyCFunction)(void (*)(void))streams, METH_FASTCALL, "One step's noise uniforms and references."},
     {NULL, NULL, 0, NULL},
 };
 

@@ -1,0 +1,164 @@
+/* Per-step streams of an episode's draw, compiled: the uniforms of one step's Box-Muller noise and
+ * its random_steps reference, read from cursors that move one number a step, so that an episode
+ * costs what its steps read. Included by _draw_kernel.c alone (after its PCG64 helpers: Lcg, join,
+ * output, uniform, jump_of, MULTIPLIER); no Python calls here.
+ *
+ * The numbers are those `rows` gives, and the reference that of envs/references.py's
+ * random_steps: the package checks both against their numpy references at import
+ * (ssme_envs.envs.episode_streams) and uses the kernel only where they agree. */
+#ifndef SSME_ENVS_DRAW_STREAMS_H
+#define SSME_ENVS_DRAW_STREAMS_H
+
+#include <math.h>
+
+/* the jumps of a call, found once each: a call seeks few distinct positions (0, half, the
+ * reference's uniforms) for hundreds of envs */
+enum { JUMPS = 16 };
+typedef struct {
+    uint64_t n[JUMPS];
+    u128 mult[JUMPS], sum[JUMPS];
+    int used;
+} Jumps;
+
+static void jump_cached(Jumps *c, uint64_t n, u128 *mult, u128 *sum)
+{
+    for (int i = 0; i < c->used; i++)
+        if (c->n[i] == n) {
+            *mult = c->mult[i];
+            *sum = c->sum[i];
+            return;
+        }
+    jump_of(n, mult, sum);
+    if (c->used < JUMPS) {
+        c->n[c->used] = n;
+        c->mult[c->used] = *mult;
+        c->sum[c->used++] = *sum;
+    }
+}
+
+/* Number q of an episode's draw from origin o (ORIGIN words): flag 0 or 1, the low or high half
+ * of output(s); flag 2, the kept half o[5] (q = 0 where the generator held one), whose next
+ * number is the low half of the first new output. */
+typedef struct {
+    u128 s;
+    uint64_t flag;
+} Cursor;
+
+static inline Cursor seek(const uint64_t *o, uint64_t q, Jumps *jumps)
+{
+    Cursor c;
+    const uint64_t h = o[4] != 0;
+    if (h && q == 0) {
+        c.s = join(o[0], o[1]);
+        c.flag = 2;
+        return c;
+    }
+    const uint64_t f = q - h; /* the new half f: output f / 2 + 1, its high half where f is odd */
+    u128 mult, sum;
+    jump_cached(jumps, f / 2 + 1, &mult, &sum);
+    c.s = mult * join(o[0], o[1]) + sum * join(o[2], o[3]);
+    c.flag = f & 1;
+    return c;
+}
+
+static inline float number(const Cursor *c, const uint64_t *o)
+{
+    if (c->flag == 2)
+        return uniform((uint32_t)o[5]);
+    const uint64_t word = output(c->s);
+    return uniform(c->flag ? (uint32_t)(word >> 32) : (uint32_t)word);
+}
+
+static inline void advance(Cursor *c, u128 inc)
+{
+    if (c->flag == 0) {
+        c->flag = 1;
+        return;
+    }
+    c->s = MULTIPLIER * c->s + inc;
+    c->flag = 0;
+}
+
+/* an env's cursor words: the step they hold, the radius and angle cursors, the reference's hold */
+enum { AT, R_LO, R_HI, R_FLAG, A_LO, A_HI, A_FLAG, HOLD_START, HOLD_END, LEVEL, STREAM_WORDS };
+
+typedef struct {
+    int64_t half, refs_at, holds, shortest, longest;
+    double amplitude;
+} Layout;
+
+static inline void store(uint64_t *w, const Cursor *c)
+{
+    w[0] = (uint64_t)c->s;
+    w[1] = (uint64_t)(c->s >> 64);
+    w[2] = c->flag;
+}
+
+static inline Cursor load(const uint64_t *w)
+{
+    Cursor c = {join(w[0], w[1]), w[2]};
+    return c;
+}
+
+/* The reference's hold at step t and its level: holds of shortest + floor(u (longest - shortest
+ * + 1)) steps from the first `holds` uniforms at refs_at, levels (2 u - 1) amplitude from the next
+ * `holds`; into the words HOLD_START, HOLD_END (the hold's steps) and LEVEL. */
+static void find_hold(uint64_t *w, const uint64_t *o, int64_t t, const Layout *l, Jumps *jumps)
+{
+    const u128 inc = join(o[2], o[3]);
+    Cursor u = seek(o, (uint64_t)l->refs_at, jumps);
+    int64_t begin = 0, end = 0, hold = 0;
+    for (; hold < l->holds; hold++) {
+        const double x = (double)number(&u, o);
+        advance(&u, inc);
+        begin = end;
+        end += l->shortest + (int64_t)floor(x * (double)(l->longest - l->shortest + 1));
+        if (end > t)
+            break;
+    }
+    if (hold == l->holds) { /* past the last hold's end (the holds cover every episode): the last */
+        hold = l->holds - 1;
+        end = INT64_MAX;
+    }
+    for (int64_t skip = hold + 1; skip < l->holds + hold; skip++) /* to level uniform holds + hold */
+        advance(&u, inc);
+    double level = 2.0 * (double)number(&u, o) - 1.0;
+    level *= l->amplitude;
+    w[HOLD_START] = (uint64_t)begin;
+    w[HOLD_END] = (uint64_t)end;
+    memcpy(&w[LEVEL], &level, sizeof level);
+}
+
+/* One env at step t: its radius and angle uniforms (row t of normal_rows: u_t and u_half+t, or
+ * u_t-half and u_t from t = half on) and its reference; the cursors move on from the step they
+ * hold where t is that step or the next, and are sought from the origin otherwise (or fresh). */
+static inline void stream_step(uint64_t *w, const uint64_t *o, int64_t t, int fresh, const Layout *l,
+                               Jumps *jumps, float *radius, float *angle, double *ref)
+{
+    Cursor r, a;
+    const int64_t held = (int64_t)w[AT];
+    if (!fresh && held == t) {
+        r = load(w + R_LO);
+        a = load(w + A_LO);
+    } else if (!fresh && held + 1 == t && t != l->half) {
+        const u128 inc = join(o[2], o[3]);
+        r = load(w + R_LO);
+        a = load(w + A_LO);
+        advance(&r, inc);
+        advance(&a, inc);
+    } else {
+        const int cosine = t < l->half;
+        r = seek(o, (uint64_t)(cosine ? t : t - l->half), jumps);
+        a = seek(o, (uint64_t)(cosine ? l->half + t : t), jumps);
+    }
+    store(w + R_LO, &r);
+    store(w + A_LO, &a);
+    w[AT] = (uint64_t)t;
+    *radius = number(&r, o);
+    *angle = number(&a, o);
+    if (fresh || t < (int64_t)w[HOLD_START] || t >= (int64_t)w[HOLD_END])
+        find_hold(w, o, t, l, jumps);
+    memcpy(ref, &w[LEVEL], sizeof *ref);
+}
+
+#endif /* SSME_ENVS_DRAW_STREAMS_H */
