@@ -91,9 +91,10 @@ def _kernel_agrees(kernel: object) -> bool:
     cursors = np.zeros((n, STREAM_WORDS), dtype=np.uint64)
     cursors[:, 0] = _UNSET
     codes = np.array(layout[:5], dtype=np.int64)
-    for fresh, steps in ((True, (0, 0, 0, 0)), (False, (1, 0, 2, 5)), (False, (2, 1, 3, 6)),
-                         (False, (3, 9, 3, 7)), (False, (13, 10, 4, 8)), (False, (6, 11, 12, 13))):  # fmt: skip
-        t = np.array(steps, dtype=np.int64)
+    # a restart, steps on by one, repeated, skipped, past half (sines) and across holds
+    steps = ((0, 0, 0, 0), (1, 0, 2, 5), (2, 1, 3, 6), (3, 9, 3, 7), (13, 10, 4, 8), (6, 11, 12, 13))
+    for row, at in enumerate(steps):
+        fresh, t = row == 0, np.array(at, dtype=np.int64)
         got = np.empty(n), np.empty(n, np.float32), np.empty(n, np.float32)
         want = np.empty(n), np.empty(n, np.float32), np.empty(n, np.float32)
         sines = kernel.streams(origins, envs, t, cursors, codes, layout.amplitude, fresh, *got)

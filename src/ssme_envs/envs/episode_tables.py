@@ -58,7 +58,7 @@ class EpisodeTables:
             noise = self._noise[:, t[0]]
             refs = self._refs[:, t[0]] if self._refs is not None else self._shared_refs[:, t[0], None]
             return refs, noise, t_bound
-        flat = t * self._n + self._rows  # one flat index for both tables: take is much faster than fancy indexing
+        flat = t * self._n + self._rows  # one flat index for both tables: take beats fancy indexing
         noise = np.take(self._noise.reshape(len(self._noise), -1), flat, axis=1)
         if self._refs is None:
             refs = np.take(self._shared_refs, t, axis=1)
