@@ -62,10 +62,11 @@ def box_muller(radius: np.ndarray, angle: np.ndarray, sine: bool | np.ndarray) -
     radius *= -2.0
     np.sqrt(radius, out=radius)
     angle *= TWO_PI
-    if isinstance(sine, np.ndarray):
-        sines = np.sin(angle)
+    if isinstance(sine, np.ndarray):  # a few long episodes past half: their sines alone
+        rows = sine.nonzero()[0]
+        sines = np.sin(angle[rows])
         np.cos(angle, out=angle)
-        np.copyto(angle, sines, where=sine)
+        angle[rows] = sines
     else:
         (np.sin if sine else np.cos)(angle, out=angle)
     angle *= radius
@@ -141,7 +142,10 @@ class EpisodeStreams:
             args = (self._codes, self._layout.amplitude, fresh, refs[0], radius, angle)
             sines = _KERNEL.streams(origins, envs, t, self._cursors, *args)
         else:  # the cursors are sought afresh once the draws are origins again (a reset of all)
-            sines = table_uniforms(self._draws.table, envs, t, self._layout, refs[0], radius, angle)
+            table = self._draws.table
+            if table is None:  # origins without the stream kernel (episode_source picks tables then)
+                table = np.ascontiguousarray(self._draws.rows(self._all, 0, self._draws.size).T)
+            sines = table_uniforms(table, envs, t, self._layout, refs[0], radius, angle)
         sine = sines == k if sines in (0, k) else t >= self._layout.half
         return refs, box_muller(radius, angle, sine)[None]
 

@@ -369,9 +369,13 @@ class NozzleTask:
         d = a - prev
         terminated = abs(x) > self.envelope
         reward = -self.error_weight * (e * e) - self.rate_weight * (d * d)
-        if ops.any(terminated):  # the penalty's passes only on the steps that need them (else - 0.0)
-            reward = reward - (self.step_cost_bound * (self.horizon - t + 1)) * terminated
+        if ops.any(terminated):  # the penalty's passes only on the steps that need them
+            reward = ops.charge(reward, terminated, self._envelope_penalty, t)
         return m, e, integral, reward, terminated
+
+    def _envelope_penalty(self, t: Any) -> Any:
+        """What leaving the envelope at step t costs: the worst reward of the steps it skips."""
+        return self.step_cost_bound * (self.horizon - t + 1)
 
     def nonfinite_reward(self, t: Any) -> Any:
         """The reward of step ``t`` (an int or an int array) whose own reward came out NaN or

@@ -68,14 +68,27 @@ class Carrier:
 
     ``where(cond, a, b)``, ``clip(x, lo, hi)``; ``at(schedule, t)``: the entries of a
     :class:`Schedule` acting on the step t - 1 -> t; ``any(cond)``: whether a condition holds
-    anywhere (to skip the passes of a rare branch); ``batched``: True for arrays, where a plant
-    core with two carriers of one arithmetic (``models``) picks its array one."""
+    anywhere (to skip the passes of a rare branch); ``charge(values, cond, cost, t)``: ``values
+    - cost(t)`` where ``cond`` holds, the values elsewhere (arrays: in place, ``cost`` computed
+    on those entries alone); ``batched``: True for arrays, where a plant core with two carriers
+    of one arithmetic (``models``) picks its array one."""
 
     batched: bool
     where: Callable[[Any, Any, Any], Any]
     clip: Callable[[Any, float, float], Any]
     at: Callable[[Schedule, Any], Any]
     any: Callable[[Any], bool] = bool
+    charge: Callable[[Any, Any, Callable[[Any], Any], Any], Any] = lambda values, cond, cost, t: (
+        values - cost(t) if cond else values
+    )
+
+
+def _array_charge(
+    values: np.ndarray, cond: np.ndarray, cost: Callable[[Any], Any], t: np.ndarray
+) -> np.ndarray:
+    hit = cond.nonzero()[0]
+    values[hit] -= cost(t[hit])
+    return values
 
 
 def _float_clip(x: float, lo: float, hi: float) -> float:
@@ -97,9 +110,11 @@ CLIP_UFUNC: np.ufunc = (getattr(np, "_core", None) or np.core).umath.clip
 _ARRAY_CLIP = CLIP_UFUNC
 _ARRAY_ANY = np.ndarray.any
 SYNCED = Carrier(
-    batched=True, where=np.where, clip=_ARRAY_CLIP, at=_rows_synced, any=_ARRAY_ANY
+    batched=True, where=np.where, clip=_ARRAY_CLIP, at=_rows_synced, any=_ARRAY_ANY, charge=_array_charge
 )  # every env at one step
-GATHER = Carrier(batched=True, where=np.where, clip=_ARRAY_CLIP, at=_rows_gathered, any=_ARRAY_ANY)
+GATHER = Carrier(
+    batched=True, where=np.where, clip=_ARRAY_CLIP, at=_rows_gathered, any=_ARRAY_ANY, charge=_array_charge
+)
 
 
 class Uniforms(Protocol):
