@@ -70,7 +70,7 @@ def test_every_step_is_the_whole_episodes_step(kind, seconds, seeds, moves, to_t
         if to_table and step == len(moves) // 2:  # a sub-env given another bit generator: a table
             draws.set_generator(0, np.random.Generator(np.random.MT19937(value)))
         if move == "restart":
-            restart = np.arange(value % n, n)[:: 1 + value % 2]
+            restart = np.arange(value % n, n)[:: 1 + value % 2].copy()  # C-contiguous, as flatnonzero gives
             fresh_refs, fresh_noise = whole_episodes(task, [draws.generators[i] for i in restart])
             draws.start(restart)
             ref0, noise0 = streams.restart(restart)

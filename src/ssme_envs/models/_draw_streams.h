@@ -79,8 +79,11 @@ static inline void advance(Cursor *c, u128 inc)
     c->flag = 0;
 }
 
-/* an env's cursor words: the step they hold, the radius and angle cursors, the reference's hold */
-enum { AT, R_LO, R_HI, R_FLAG, A_LO, A_HI, A_FLAG, HOLD_START, HOLD_END, LEVEL, STREAM_WORDS };
+/* An env's cursor words: the step they hold, the radius and angle cursors' states, the episode's
+LCG increment, both cursors' flags, the reference's hold (its first step in the low half, its end in
+the high one) and level. A step on reads these 80 bytes alone, not the origin. */
+enum { AT, R_LO, R_HI, A_LO, A_HI, INC_LO, INC_HI, FLAGS, HOLD, LEVEL, STREAM_WORDS };
+enum { NO_END = 0xffffffffu }; /* the last hold's end: past every step */
 
 typedef struct {
     int64_t half, refs_at, holds, shortest, longest;
@@ -91,18 +94,17 @@ static inline void store(uint64_t *w, const Cursor *c)
 {
     w[0] = (uint64_t)c->s;
     w[1] = (uint64_t)(c->s >> 64);
-    w[2] = c->flag;
 }
 
-static inline Cursor load(const uint64_t *w)
+static inline Cursor load(const uint64_t *w, uint64_t flag)
 {
-    Cursor c = {join(w[0], w[1]), w[2]};
+    Cursor c = {join(w[0], w[1]), flag};
     return c;
 }
 
 /* The reference's hold at step t and its level: holds of shortest + floor(u (longest - shortest
  * + 1)) steps from the first `holds` uniforms at refs_at, levels (2 u - 1) amplitude from the next
- * `holds`; into the words HOLD_START, HOLD_END (the hold's steps) and LEVEL. */
+ * `holds`; into the words HOLD (the hold's steps) and LEVEL. */
 static void find_hold(uint64_t *w, const uint64_t *o, int64_t t, const Layout *l, Jumps *jumps)
 {
     const u128 inc = join(o[2], o[3]);
@@ -116,16 +118,15 @@ static void find_hold(uint64_t *w, const uint64_t *o, int64_t t, const Layout *l
         if (end > t)
             break;
     }
-    if (hold == l->holds) { /* past the last hold's end (the holds cover every episode): the last */
-        hold = l->holds - 1;
-        end = INT64_MAX;
+    if (hold == l->holds || end > (int64_t)NO_END) { /* the last hold (the holds cover every episode) */
+        hold = hold < l->holds ? hold : l->holds - 1;
+        end = NO_END;
     }
     for (int64_t skip = hold + 1; skip < l->holds + hold; skip++) /* to level uniform holds + hold */
         advance(&u, inc);
     double level = 2.0 * (double)number(&u, o) - 1.0;
     level *= l->amplitude;
-    w[HOLD_START] = (uint64_t)begin;
-    w[HOLD_END] = (uint64_t)end;
+    w[HOLD] = (uint64_t)begin | ((uint64_t)end << 32);
     memcpy(&w[LEVEL], &level, sizeof level);
 }
 
@@ -138,25 +139,29 @@ static inline void stream_step(uint64_t *w, const uint64_t *o, int64_t t, int fr
     Cursor r, a;
     const int64_t held = (int64_t)w[AT];
     if (!fresh && held == t) {
-        r = load(w + R_LO);
-        a = load(w + A_LO);
+        r = load(w + R_LO, w[FLAGS] & 3);
+        a = load(w + A_LO, w[FLAGS] >> 2);
     } else if (!fresh && held + 1 == t && t != l->half) {
-        const u128 inc = join(o[2], o[3]);
-        r = load(w + R_LO);
-        a = load(w + A_LO);
+        const u128 inc = join(w[INC_LO], w[INC_HI]);
+        r = load(w + R_LO, w[FLAGS] & 3);
+        a = load(w + A_LO, w[FLAGS] >> 2);
         advance(&r, inc);
         advance(&a, inc);
     } else {
         const int cosine = t < l->half;
         r = seek(o, (uint64_t)(cosine ? t : t - l->half), jumps);
         a = seek(o, (uint64_t)(cosine ? l->half + t : t), jumps);
+        w[INC_LO] = o[2];
+        w[INC_HI] = o[3];
     }
     store(w + R_LO, &r);
     store(w + A_LO, &a);
+    w[FLAGS] = r.flag | a.flag << 2;
     w[AT] = (uint64_t)t;
     *radius = number(&r, o);
     *angle = number(&a, o);
-    if (fresh || t < (int64_t)w[HOLD_START] || t >= (int64_t)w[HOLD_END])
+    const uint64_t hold = w[HOLD];
+    if (fresh || (uint64_t)t < (hold & NO_END) || (uint64_t)t >= (hold >> 32))
         find_hold(w, o, t, l, jumps);
     memcpy(ref, &w[LEVEL], sizeof *ref);
 }
