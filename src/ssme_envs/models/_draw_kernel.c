@@ -90,6 +90,19 @@ static const int64_t *env_indices(Views *v, PyObject *obj, Py_ssize_t n, Py_ssiz
     return envs;
 }
 
+/* the episodes' origins, ORIGIN words each, their count into *n; NULL with an error otherwise */
+static const uint64_t *take_origins(Views *v, PyObject *obj, const char *caller, Py_ssize_t *n)
+{
+    Py_ssize_t words;
+    const uint64_t *origins = take(v, obj, 8, "QLK", -1, 0, "origins", &words);
+    if (origins != NULL && words % ORIGIN != 0) {
+        PyErr_Format(PyExc_ValueError, "%s: origins of %d words each expected", caller, ORIGIN);
+        return NULL;
+    }
+    *n = words / ORIGIN;
+    return origins;
+}
+
 /* start(bitgens, envs, count, origins): for each env i of envs, origins[i] <- the state of the
  * generator whose numpy capsule is bitgens[i], which then moves on as drawing `count` float32
  * numbers moves it. Every argument is checked before a generator moves. */
@@ -197,13 +210,9 @@ static PyObject *rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     }
     Views v = {.count = 0};
     PyObject *result = NULL;
-    Py_ssize_t k, words, items;
-    const uint64_t *origins = take(&v, args[0], 8, "QLK", -1, 0, "origins", &words);
-    if (origins != NULL && words % ORIGIN != 0) {
-        PyErr_Format(PyExc_ValueError, "rows: origins of %d words each expected", ORIGIN);
-        goto done;
-    }
-    const int64_t *envs = origins == NULL ? NULL : env_indices(&v, args[1], words / ORIGIN, &k);
+    Py_ssize_t k, n, items;
+    const uint64_t *origins = take_origins(&v, args[0], "rows", &n);
+    const int64_t *envs = origins == NULL ? NULL : env_indices(&v, args[1], n, &k);
     float *out = envs == NULL ? NULL : take(&v, args[4], 4, "f", -1, 1, "out", &items);
     if (out == NULL)
         goto done;
@@ -286,13 +295,8 @@ static PyObject *streams(PyObject *self, PyObject *const *args, Py_ssize_t nargs
         return NULL;
     Views v = {.count = 0};
     PyObject *result = NULL;
-    Py_ssize_t k, words, cursor_words;
-    const uint64_t *origins = take(&v, args[0], 8, "QLK", -1, 0, "origins", &words);
-    if (origins != NULL && words % ORIGIN != 0) {
-        PyErr_Format(PyExc_ValueError, "streams: origins of %d words each expected", ORIGIN);
-        goto done;
-    }
-    const Py_ssize_t n = words / ORIGIN;
+    Py_ssize_t k, n, cursor_words;
+    const uint64_t *origins = take_origins(&v, args[0], "streams", &n);
     const int64_t *envs = origins == NULL ? NULL : env_indices(&v, args[1], n, &k);
     const int64_t *t = envs == NULL ? NULL : take(&v, args[2], 8, "qlL", k, 0, "t", NULL);
     uint64_t *cursors = t == NULL ? NULL : take(&v, args[3], 8, "QLK", -1, 1, "cursors", &cursor_words);
