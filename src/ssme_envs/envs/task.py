@@ -154,6 +154,10 @@ class TrackingTask(Protocol):
     promises to scale them into float64 (the exact upcast's products), saving the vector env a
     conversion pass per step. A batched step may return its observation values as a fresh
     float32 (columns, N) array, already rounded: the vector env hands that table out as it is.
+    A task whose ``stream_layout`` (optional) is a
+    :class:`~ssme_envs.envs.references.StreamLayout` says where each step's noise and reference
+    lie in its draw: the vector env then makes each step's alone
+    (:mod:`~ssme_envs.envs.episode_streams`), the same values as its ``episodes`` gives.
     """
 
     observation: Observation
