@@ -16,6 +16,7 @@ values are read from the table with numpy (:func:`table_uniforms`).
 
 from __future__ import annotations
 
+import copy
 from typing import Any, Protocol
 
 import numpy as np
@@ -82,9 +83,7 @@ def _kernel_agrees(kernel: object) -> bool:
     rngs = [np.random.Generator(np.random.PCG64(seed)) for seed in (0, 1, 2**63 + 5, 12345)]
     for i, rng in enumerate(rngs):
         rng.random(i % 2, dtype=np.float32)  # envs 1 and 3 hold a kept half
-    twins = [np.random.Generator(np.random.PCG64(0)) for _ in rngs]
-    for twin, rng in zip(twins, rngs, strict=True):
-        twin.bit_generator.state = rng.bit_generator.state
+    twins = copy.deepcopy(rngs)
     table = np.stack([twin.random(size, dtype=np.float32) for twin in twins])
     origins = np.zeros((n, ORIGIN_WORDS), dtype=np.uint64)
     envs = np.arange(n)
