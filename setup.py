@@ -1,7 +1,8 @@
-"""The compiled kernels, optional: the nozzle joint's RK4, the engine's step and the vector envs'
-episode draws. Without a C compiler the package installs and runs on their references, which
-give the same bits (ssme_envs.models.nozzle_joint, ssme_envs.models.engine_step, numpy's
-generators in ssme_envs.envs.episode_draws)."""
+"""The compiled kernels, optional: the nozzle joint's RK4, the engine's step, the vector envs'
+episode draws and the nozzle family's batch scoring. Without a C compiler the package installs
+and runs on their references, which give the same bits (ssme_envs.models.nozzle_joint,
+ssme_envs.models.engine_step, numpy's generators in ssme_envs.envs.episode_draws, numpy's batch
+step in ssme_envs.envs.nozzle_compiled)."""
 
 from setuptools import Extension, setup
 from setuptools.command.build_ext import build_ext
@@ -32,7 +33,7 @@ setup(
             depends=[f"src/ssme_envs/models/{header}" for header in HEADERS],
             optional=True,
         )
-        for name in ("_joint_kernel", "_engine_kernel", "_draw_kernel")
+        for name in ("_joint_kernel", "_engine_kernel", "_draw_kernel", "_score_kernel")
     ],
     cmdclass={"build_ext": BuildExt},
 )

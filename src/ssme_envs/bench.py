@@ -198,18 +198,20 @@ def _row(
 def kernels_used() -> str:
     """A sentence naming what ran each compiled step: its kernel, or the reference where none is
     built (or ``SSME_ENVS_NO_KERNEL`` is set)."""
-    from ssme_envs.envs import episode_draws, episode_streams
+    from ssme_envs.envs import episode_draws, episode_streams, nozzle_compiled
     from ssme_envs.models import engine_step, nozzle_joint
 
     ran = {"compiled": "compiled kernel", "python": "Python reference"}
     batch = "compiled kernel" if engine_step.has_batch(engine_step._KERNEL) else "numpy reference"
     draws = {"compiled": "compiled kernel", "python": "numpy generators (whole episodes)"}
     streams = {"compiled": "compiled cursors", "python": "numpy reference (from whole episodes)"}
+    scoring = {"compiled": "compiled kernel", "python": "numpy reference"}
     return (
         f"The nozzle joint ran its {ran[nozzle_joint.KERNEL]}, "
         f"the engine's float step its {ran[engine_step.KERNEL]}, its batch step its {batch}; "
         f"the vector envs' episode draws their {draws[episode_draws.KERNEL]}, the nozzle's and "
-        f"launcher's per-step streams their {streams[episode_streams.KERNEL]}."
+        f"launcher's per-step streams their {streams[episode_streams.KERNEL]} and their batch "
+        f"scoring its {scoring[nozzle_compiled.KERNEL]}."
     )
 
 

@@ -19,6 +19,7 @@ from ssme_envs.envs.launcher_servo import (
     servo_batch,
     servo_floats,
 )
+from ssme_envs.envs.nozzle_compiled import score_config, score_kernel, score_observe
 from ssme_envs.envs.nozzle_task import (
     DEG,
     ENV_STEP_RATE,
@@ -83,6 +84,8 @@ class LauncherTask:
     # models.nozzle.integration_substeps for a 2 ms sample, 1 for Table 1's and the identified
     # joints; a plant that needs more than MAX_SUBSTEPS per attitude step is refused
     rk4_substeps: int = field(init=False, repr=False)
+    # the compiled batch step's numbers of score and observation, the pitch rate given
+    score_config: np.ndarray = field(init=False, repr=False, compare=False)
 
     observation: ClassVar[Observation] = LAUNCHER_OBSERVATION
     action_names: ClassVar[tuple[str, ...]] = ("nozzle deflection",)
@@ -158,6 +161,7 @@ class LauncherTask:
             for joint in covered_joints(self.plant, self.nozzle.spread)
         )  # the worst joint the spread can draw sets the count
         object.__setattr__(self, "rk4_substeps", rk4_substeps)
+        object.__setattr__(self, "score_config", score_config(self.nozzle, DEG, measured=False))
 
     @classmethod
     def observation_space(cls) -> gym.spaces.Box:
@@ -193,7 +197,8 @@ class LauncherTask:
         noise: Sequence[Value], ops: Carrier,
     ) -> tuple[LauncherState, tuple, Value, Any]:  # fmt: skip
         """One attitude step, as :class:`~ssme_envs.envs.task.TrackingTask` says: the nozzle
-        command in [-1, 1] of 3 deg; returns (state, the 7 observation values, reward, terminated)."""
+        command in [-1, 1] of 3 deg; returns (state, the 7 observation values, reward, terminated),
+        on arrays as :meth:`NozzleTask.step` returns them."""
         nozzle, theta, q, integral, prev, joint = state
         a, ref = action[0], ref[0]
         drive = self.servo[0] * (a * self.max_deflection)
@@ -202,6 +207,10 @@ class LauncherTask:
             gain = ops.where(t > self.fault_step, fault.magnitude, 1.0)
         params = self.rk4_params if joint is None else joint
         nozzle, theta, q = self.plant_step(nozzle, theta, q, drive, gain, params, ops)
+        if ops.batched and (kernel := score_kernel(measured=False)) is not None:  # the rest in one pass
+            args = (theta, a, prev, t, ref, noise[0], integral, q, nozzle[0])
+            values, reward, terminated = score_observe(kernel, self.score_config, *args)
+            return LauncherState(nozzle, theta, q, integral, prev, joint), values, reward, terminated
         m, e, integral, reward, terminated = self.nozzle.score(
             theta, a, prev, t, ref, noise[0], integral, ops
         )

@@ -11,6 +11,7 @@ from typing import Any, ClassVar, NamedTuple
 import gymnasium as gym
 import numpy as np
 
+from ssme_envs.envs.nozzle_compiled import score_config, score_kernel, score_observe
 from ssme_envs.envs.plant_spread import PlantSpread, covered_joints, resolve_spread
 from ssme_envs.envs.references import (
     Fault,
@@ -188,6 +189,8 @@ class NozzleTask:
     fault_step: int = field(init=False)
     # largest reward loss of one step inside the envelope (with 1 deg for noise)
     step_cost_bound: float = field(init=False)
+    # the compiled batch step's numbers of score and observation (nozzle_compiled.score_config)
+    score_config: np.ndarray = field(init=False, repr=False, compare=False)
 
     observation: ClassVar[Observation] = NOZZLE_OBSERVATION
     action_names: ClassVar[tuple[str, ...]] = ("torque",)
@@ -249,6 +252,7 @@ class NozzleTask:
         bias = abs(self.fault.magnitude) if self.fault is not None and self.fault.kind == "sensor_bias" else 0
         error = DEG * (self.envelope + float(self.amplitude[0]) + bias) + 1.0
         object.__setattr__(self, "step_cost_bound", self.error_weight * error**2 + self.rate_weight * 2.0**2)
+        object.__setattr__(self, "score_config", score_config(self, DEG / self.dt, measured=True))
 
     @classmethod
     def observation_space(cls) -> gym.spaces.Box:
@@ -338,7 +342,8 @@ class NozzleTask:
     ) -> tuple[NozzleState, tuple, Value, Any]:  # fmt: skip
         """One step, as :class:`~ssme_envs.envs.task.TrackingTask` says: the torque command in
         [-1, 1] of full scale, ``ref`` in rad. Returns (state, the 6 observation values, reward,
-        terminated)."""
+        terminated); on arrays with the compiled scoring, the values as a float32 table and the
+        state's rows stepped in place (:mod:`~ssme_envs.envs.nozzle_compiled`)."""
         plant, torque, m_prev, integral, prev, joint = state
         a, ref = action[0], ref[0]
         cmd = a * self.torque_limit
@@ -353,6 +358,10 @@ class NozzleTask:
             torque = torque + ops.clip(target - torque, -limit, limit)
         params = self.rk4_params if joint is None else joint
         plant = integrate(plant, torque, self.dt / self.substeps, self.substeps, params, ops)
+        if ops.batched and (kernel := score_kernel(measured=True)) is not None:  # the rest in one pass
+            args = (plant[0], a, prev, t, ref, noise[0], integral, m_prev, None)
+            values, reward, terminated = score_observe(kernel, self.score_config, *args)
+            return NozzleState(plant, torque, m_prev, integral, prev, joint), values, reward, terminated
         m, e, integral, reward, terminated = self.score(plant[0], a, prev, t, ref, noise[0], integral, ops)
         rate = (m - m_prev) * (DEG / self.dt)
         obs = (m * DEG, rate, ref * DEG, e, integral, a)

@@ -23,8 +23,20 @@ static void *take(Views *v, PyObject *obj, Py_ssize_t itemsize, const char *code
 {
     Py_buffer *view = &v->views[v->count];
     int flags = PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0);
-    if (v->count >= MAX_VIEWS || PyObject_GetBuffer(obj, view, flags) < 0)
+    if (v->count >= MAX_VIEWS) {
+        PyErr_SetString(PyExc_RuntimeError, "too many buffer arguments");
         return NULL;
+    }
+    if (PyObject_GetBuffer(obj, view, flags) < 0) { /* numpy's own message names no argument */
+        PyObject *kind = PyErr_Occurred();
+        const int not_buffer = kind != NULL && PyErr_GivenExceptionMatches(kind, PyExc_TypeError);
+        PyErr_Clear();
+        if (not_buffer)
+            PyErr_Format(PyExc_TypeError, "%s: an array expected, got %.100s", name, Py_TYPE(obj)->tp_name);
+        else
+            PyErr_Format(PyExc_ValueError, "%s: a C-contiguous%s array expected", name, writable ? " writable" : "");
+        return NULL;
+    }
     v->count++;
     const char *format = view->format == NULL ? "B" : view->format;
     char code = format[0] == '<' || format[0] == '=' || format[0] == '@' ? format[1] : format[0];
