@@ -24,13 +24,13 @@ from ssme_envs.models.kernels import load_kernel
 if TYPE_CHECKING:
     from ssme_envs.envs.nozzle_task import NozzleTask
 
-DEG = 180.0 / math.pi
-
 
 def score_config(task: NozzleTask, rate_scale: float, measured: bool) -> np.ndarray:
     """The kernel's float64 config of a nozzle task's scoring (``_score_kernel.c``'s order): the
     observation's rate column is ``(m - m_prev) rate_scale`` where ``measured`` (the nozzle's
     angle rate), else the given rate times ``rate_scale`` (the launcher's pitch rate)."""
+    from ssme_envs.envs.nozzle_task import DEG  # the task's own (it imports this module)
+
     fault = task.fault
     bias = fault is not None and fault.kind == "sensor_bias"
     return np.array(

@@ -193,6 +193,8 @@ done:
     return result;
 }
 
+#include "_draw_streams.h"
+
 /* rows(origins, envs, lo, hi, out): out[r, j] <- number lo + r of the episode drawn from
  * origins[envs[j]], for r in [0, hi - lo); out is float32 (hi - lo, len(envs)). */
 static PyObject *rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
@@ -220,17 +222,11 @@ static PyObject *rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
         PyErr_SetString(PyExc_ValueError, "rows: out of (hi - lo, len(envs)) numbers expected");
         goto done;
     }
-    /* number q of an episode is the buffer's (q = 0 where it has one) or new half f = q - has:
-     * the low (f even) or high half of output f / 2 + 1 */
-    u128 mult[2], sum[2];
-    for (int h = 0; h < 2; h++) {
-        long long f = lo - h < 0 ? 0 : lo - h;
-        jump_of((uint64_t)(f / 2 + 1), &mult[h], &sum[h]);
-    }
     /* TILE envs at a time, each env's numbers into a scratch row, then written out a step at a
      * time: a row of TILE floats is a cache line, where writing down one column at a time
      * would touch a line (and a page) per number */
     const Py_ssize_t r = (Py_ssize_t)(hi - lo);
+    Jumps jumps = {.used = 0};
     float *scratch = r == 0 ? NULL : PyMem_Malloc((size_t)(TILE * r) * sizeof(float));
     if (r > 0 && scratch == NULL) {
         PyErr_NoMemory();
@@ -238,31 +234,10 @@ static PyObject *rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     }
     for (Py_ssize_t j0 = 0; j0 < k && r > 0; j0 += TILE) {
         const Py_ssize_t b = k - j0 < TILE ? k - j0 : TILE;
-        for (Py_ssize_t t = 0; t < b; t++) {
+        for (Py_ssize_t t = 0; t < b; t++) { /* the streams' cursor, from number lo on */
             const uint64_t *o = origins + ORIGIN * envs[j0 + t];
-            const int h = o[4] != 0;
-            float *col = scratch + t * r, *end = col + r;
-            if (h && lo == 0) /* the kept half */
-                *col++ = uniform((uint32_t)o[5]);
-            if (col == end)
-                continue;
-            const u128 inc = join(o[2], o[3]);
-            u128 s = mult[h] * join(o[0], o[1]) + sum[h] * inc;
-            uint64_t word = output(s);
-            if ((lo - h) & 1 && lo > 0) { /* starting on the high half of the jumped-to output */
-                *col++ = uniform((uint32_t)(word >> 32));
-            } else {
-                *col++ = uniform((uint32_t)word);
-                if (col < end)
-                    *col++ = uniform((uint32_t)(word >> 32));
-            }
-            while (col < end) {
-                s = MULTIPLIER * s + inc;
-                word = output(s);
-                *col++ = uniform((uint32_t)word);
-                if (col < end)
-                    *col++ = uniform((uint32_t)(word >> 32));
-            }
+            float *col = scratch + t * r;
+            fill(seek(o, (uint64_t)lo, &jumps), o, join(o[2], o[3]), col, col + r);
         }
         for (Py_ssize_t q = 0; q < r; q++)
             for (Py_ssize_t t = 0; t < b; t++)
@@ -274,8 +249,6 @@ done:
     release(&v);
     return result;
 }
-
-#include "_draw_streams.h"
 
 /* streams(origins, envs, t, cursors, layout, amplitude, fresh, refs, radius, angle): for each env
  * e = envs[j] at step t[j] >= 0, refs[j] <- its random_steps reference, radius[j] and angle[j] <-

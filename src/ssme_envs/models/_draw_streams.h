@@ -1,9 +1,10 @@
-/* Per-step streams of an episode's draw, compiled: the uniforms of one step's Box-Muller noise and
- * its random_steps reference, read from cursors that move one number a step, so that an episode
- * costs what its steps read. Included by _draw_kernel.c alone (after its PCG64 helpers: Lcg, join,
- * output, uniform, jump_of, MULTIPLIER); no Python calls here.
+/* Cursors on an episode's draw, compiled: any number of the draw sought from its origin and moved
+ * on one number at a time (read by `rows` for blocks of numbers), and the per-step streams of one
+ * step's Box-Muller noise uniforms and random_steps reference, so that an episode costs what its
+ * steps read. Included by _draw_kernel.c alone (after its PCG64 helpers: Lcg, join, output,
+ * uniform, jump_of, MULTIPLIER); no Python calls here.
  *
- * The numbers are those `rows` gives, and the reference that of envs/references.py's
+ * The numbers are numpy's draw, and the reference that of envs/references.py's
  * random_steps: the package checks both against their numpy references at import
  * (ssme_envs.envs.episode_streams) and uses the kernel only where they agree. */
 #ifndef SSME_ENVS_DRAW_STREAMS_H
@@ -77,6 +78,23 @@ static inline void advance(Cursor *c, u128 inc)
     }
     c->s = MULTIPLIER * c->s + inc;
     c->flag = 0;
+}
+
+/* The numbers [col, end) from cursor c on: one at a time to a low half, then both halves of each
+ * output (a block's reads, `rows`) */
+static inline void fill(Cursor c, const uint64_t *o, u128 inc, float *col, const float *end)
+{
+    if (col < end && c.flag != 0) {
+        *col++ = number(&c, o);
+        advance(&c, inc);
+    }
+    while (col < end) {
+        const uint64_t word = output(c.s);
+        *col++ = uniform((uint32_t)word);
+        if (col < end)
+            *col++ = uniform((uint32_t)(word >> 32));
+        c.s = MULTIPLIER * c.s + inc;
+    }
 }
 
 /* An env's cursor words: the step they hold, the radius and angle cursors' states, the episode's
