@@ -27,6 +27,7 @@ from ssme_envs.envs.references import StreamLayout
 from ssme_envs.models.kernels import load_kernel
 
 STREAM_WORDS = 10  # a sub-env's cursor words in the kernel (_draw_streams.h)
+_AT, _HOLD = 0, 8  # the words of the step the cursors hold and of the reference's hold
 _UNSET = np.uint64(2**64 - 2)  # a cursor's step before any: neither a step nor the one before one
 TWO_PI = np.float32(2.0 * np.pi)
 
@@ -127,6 +128,12 @@ class EpisodeStreams:
         """Step 0 of the new episodes of ``envs`` (int64 indices): references and noise (1, k)."""
         return self._values(envs, np.zeros(len(envs), dtype=np.int64), True)
 
+    def begin(self, envs: np.ndarray) -> None:
+        """Make the next :meth:`at` read the new episodes of ``envs`` (after ``draws.start``) from
+        their origins, as :meth:`restart` does: cursors at no step and on no hold."""
+        self._cursors[envs, _AT] = _UNSET
+        self._cursors[envs, _HOLD] = 0  # a hold that ends at step 0: sought again at any step
+
     def at(self, t: np.ndarray, t_bound: int, synced: bool) -> tuple[np.ndarray, np.ndarray, int]:
         """Step ``t`` (int64, per sub-env) of every episode: references, noise, and ``t_bound``
         as it came (the tables' signature, :class:`~ssme_envs.envs.episode_tables.EpisodeTables`)."""
@@ -154,6 +161,8 @@ class EpisodeSource(Protocol):
     or :class:`~ssme_envs.envs.episode_tables.EpisodeTables`, which give the same values."""
 
     def restart(self, envs: np.ndarray) -> tuple[np.ndarray, np.ndarray]: ...
+
+    def begin(self, envs: np.ndarray) -> None: ...
 
     def at(self, t: np.ndarray, t_bound: int, synced: bool) -> tuple[np.ndarray, np.ndarray, int]: ...
 

@@ -48,6 +48,10 @@ class EpisodeTables:
         refs, noise = self._compute(envs, 0)
         return refs[:, 0], noise[:, 0]
 
+    def begin(self, envs: np.ndarray) -> None:
+        """Step 0 of the new episodes of ``envs`` for the next :meth:`at`: their first block."""
+        self.restart(envs)
+
     def at(self, t: np.ndarray, t_bound: int, synced: bool) -> tuple[np.ndarray, np.ndarray, int]:
         """Step ``t`` (int64, per sub-env; every t at most ``t_bound``) of every episode:
         references (channels, N, or (channels, 1) where shared and synced), noise (channels, N)

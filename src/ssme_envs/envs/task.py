@@ -213,7 +213,9 @@ def set_columns(state: Any, fresh: Any, envs: np.ndarray) -> None:
         elif isinstance(block, np.ndarray) and block.ndim == 1:
             block[envs] = new  # numpy's fast path of one index (``[..., envs]`` takes its general one)
         elif isinstance(block, np.ndarray) and block.ndim == 2:  # row by row: that fast path again
-            for row, new_row in zip(block, np.broadcast_to(new, (len(block), len(envs))), strict=True):
+            shape = (len(block), len(envs))
+            rows = new if np.shape(new) == shape else np.broadcast_to(new, shape)
+            for row, new_row in zip(block, rows, strict=True):
                 row[envs] = new_row
         elif isinstance(block, np.ndarray):
             block[..., envs] = new

@@ -158,21 +158,35 @@ class TrackingVectorEnv(VectorEnv):
 
     def _restart(self, envs: np.ndarray) -> np.ndarray:
         """Zero the state of the given envs and draw their next episodes; their first observations."""
-        task, k = self.task, len(envs)
+        plants = self._draw(envs)
+        self._reset_state(envs, plants)
+        self._rewind(envs)
+        obs = self.task.initial_observation(*self._episodes.restart(envs)).T
+        return CLIP_UFUNC(obs, self._low, self._high)
+
+    def _draw(self, envs: np.ndarray) -> np.ndarray | None:
+        """Draw the next episodes of the given envs; the uniforms of their plants (None where the
+        task draws none)."""
+        task = self.task
         self._draws.start(envs)
         m = task.plant_draw_size  # the last uniforms of each draw: the episode's plant
-        plants = self._draws.rows(envs, task.draw_size - m, task.draw_size) if m else None
-        if k == self.num_envs:
-            self._state = task.initial_state(k, plants)
-        else:
-            set_columns(self._state, task.initial_state(k, plants), envs)
+        return self._draws.rows(envs, task.draw_size - m, task.draw_size) if m else None
+
+    def _rewind(self, envs: np.ndarray) -> None:
+        """Put the given envs at step 0."""
         self._t[envs] = 0
-        if k == self.num_envs:
+        if len(envs) == self.num_envs:
             self._t_bound = 0
         t = self._t  # the ends differ in most partial restarts: the pass over t only where they agree
         self._synced = bool(t[0] == t[-1] and (t == t[0]).all())
-        obs = task.initial_observation(*self._episodes.restart(envs)).T
-        return CLIP_UFUNC(obs, self._low, self._high)
+
+    def _reset_state(self, envs: np.ndarray, plants: np.ndarray | None) -> None:
+        """The initial state in the given envs, their plants drawn from ``plants``."""
+        fresh = self.task.initial_state(len(envs), plants)
+        if len(envs) == self.num_envs:
+            self._state = fresh
+        else:
+            set_columns(self._state, fresh, envs)
 
     def reset(
         self, *, seed: int | Sequence[int | None] | None = None, options: Mapping[str, Any] | None = None
@@ -229,9 +243,19 @@ class TrackingVectorEnv(VectorEnv):
         if self._t_bound >= task.horizon:  # an env past its end (restarted below) stays at it
             np.minimum(t, task.horizon, out=t)
         self._t_bound = min(self._t_bound + 1, task.horizon)
-        refs, noise, self._t_bound = self._episodes.at(t, self._t_bound, self._synced)
-        if not self._noise_as_drawn:
-            noise = noise.astype(np.float64)
+        # NEXT_STEP restarts draw their episodes before the step's episode values are read, so
+        # that one read gives their step 0 beside everyone's step t; the task steps them on at t
+        # as before (every t >= 1), which is discarded
+        fresh, read_t, synced = None, t, self._synced
+        if mode == AutoresetMode.NEXT_STEP and self._autoreset.any():
+            fresh = np.flatnonzero(self._autoreset)
+            plants = self._draw(fresh)
+            self._episodes.begin(fresh)
+            read_t = t.copy()
+            read_t[fresh] = 0
+            synced = False
+        refs, drawn, self._t_bound = self._episodes.at(read_t, self._t_bound, synced)
+        noise = drawn if self._noise_as_drawn else drawn.astype(np.float64)
         self._state, values, reward, terminated = task.step(
             self._state, clipped, t, refs, noise, SYNCED if self._synced else GATHER
         )
@@ -243,6 +267,9 @@ class TrackingVectorEnv(VectorEnv):
             table = np.empty((len(values), self.num_envs), dtype=np.float32)
             for row, value in zip(table, values, strict=True):
                 row[...] = value
+        if fresh is not None:  # the first observations of the restarts (refs (channels, 1) where shared)
+            first = refs[:, fresh] if refs.shape[1] == self.num_envs else refs.repeat(len(fresh), axis=1)
+            table[:, fresh] = task.initial_observation(first, drawn[:, fresh])
         # into the observation bounds, as the scalar envs do: one pass over the table
         CLIP_UFUNC(table, self._low_col, self._high_col, out=table)
         obs = table.T
@@ -257,12 +284,12 @@ class TrackingVectorEnv(VectorEnv):
         )
         infos: dict[str, Any] = {}
         if mode == AutoresetMode.NEXT_STEP:
-            if self._autoreset.any():
-                restart = np.flatnonzero(self._autoreset)
-                obs[restart] = self._restart(restart)
-                reward[restart] = 0.0
-                terminated[restart] = False
-                truncated[restart] = False
+            if fresh is not None:
+                self._reset_state(fresh, plants)
+                self._rewind(fresh)
+                reward[fresh] = 0.0
+                terminated[fresh] = False
+                truncated[fresh] = False
             self._autoreset = terminated | truncated
             infos = step_infos
         elif mode == AutoresetMode.DISABLED:
