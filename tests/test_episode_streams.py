@@ -25,10 +25,12 @@ from ssme_envs.envs.nozzle_task import NozzleTask
 
 needs_kernel = pytest.mark.skipif(episode_streams.KERNEL != "compiled", reason="the draw kernel is not built")
 
-# a step's move: on by one (most), repeated, skipped ahead, a jump anywhere, a restart
+# a step's move: on by one (most), repeated, skipped ahead, a jump anywhere, a restart, and a
+# restart begun for the next read (the vector env's NEXT_STEP restarts)
 MOVES = st.lists(
     st.tuples(
-        st.sampled_from(["next", "next", "next", "same", "skip", "jump", "restart"]), st.integers(0, 10**6)
+        st.sampled_from(["next", "next", "next", "same", "skip", "jump", "restart", "begin"]),
+        st.integers(0, 10**6),
     ),
     min_size=1,
     max_size=60,
@@ -69,21 +71,25 @@ def test_every_step_is_the_whole_episodes_step(kind, seconds, seeds, moves, to_t
     for step, (move, value) in enumerate(moves):
         if to_table and step == len(moves) // 2:  # a sub-env given another bit generator: a table
             draws.set_generator(0, np.random.Generator(np.random.MT19937(value)))
-        if move == "restart":
+        if move in ("restart", "begin"):
             restart = np.arange(value % n, n)[:: 1 + value % 2].copy()  # C-contiguous, as flatnonzero gives
             fresh_refs, fresh_noise = whole_episodes(task, [draws.generators[i] for i in restart])
             draws.start(restart)
-            ref0, noise0 = streams.restart(restart)
-            assert ref0.tobytes() == fresh_refs[0].tobytes() and noise0.tobytes() == fresh_noise[0].tobytes()
             refs[:, restart], noise[:, restart] = fresh_refs, fresh_noise
             t[restart] = 0
-            continue
-        t = {
-            "next": t + 1,
-            "same": t,
-            "skip": t + 1 + value % 7,
-            "jump": (t * 0 + value + np.arange(n) * 131) % length,
-        }[move]
+            if move == "restart":
+                ref0, noise0 = streams.restart(restart)
+                assert ref0.tobytes() == fresh_refs[0].tobytes()
+                assert noise0.tobytes() == fresh_noise[0].tobytes()
+                continue
+            streams.begin(restart)  # the read below gives their step 0 beside the others' steps
+        else:
+            t = {
+                "next": t + 1,
+                "same": t,
+                "skip": t + 1 + value % 7,
+                "jump": (t * 0 + value + np.arange(n) * 131) % length,
+            }[move]
         t = np.minimum(t, length - 1)
         got_refs, got_noise, _ = streams.at(t, int(t.max()), False)
         assert got_refs[0].tobytes() == refs[t, envs].tobytes()

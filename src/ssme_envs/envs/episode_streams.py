@@ -160,11 +160,17 @@ class EpisodeSource(Protocol):
     """What a vector env reads its episodes' references and unit noise from: :class:`EpisodeStreams`
     or :class:`~ssme_envs.envs.episode_tables.EpisodeTables`, which give the same values."""
 
-    def restart(self, envs: np.ndarray) -> tuple[np.ndarray, np.ndarray]: ...
+    def restart(self, envs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Step 0 of the new episodes of ``envs`` (after ``draws.start``): references, noise (channels, k)."""
+        ...
 
-    def begin(self, envs: np.ndarray) -> None: ...
+    def begin(self, envs: np.ndarray) -> None:
+        """Ready the new episodes of ``envs`` (after ``draws.start``) for an :meth:`at` at their step 0."""
+        ...
 
-    def at(self, t: np.ndarray, t_bound: int, synced: bool) -> tuple[np.ndarray, np.ndarray, int]: ...
+    def at(self, t: np.ndarray, t_bound: int, synced: bool) -> tuple[np.ndarray, np.ndarray, int]:
+        """Step ``t[i]`` of every episode i: references, noise, and the bound on t."""
+        ...
 
 
 def episode_source(task: Any, draws: EpisodeDraws) -> EpisodeSource:

@@ -244,8 +244,8 @@ class TrackingVectorEnv(VectorEnv):
             np.minimum(t, task.horizon, out=t)
         self._t_bound = min(self._t_bound + 1, task.horizon)
         # NEXT_STEP restarts draw their episodes before the step's episode values are read, so
-        # that one read gives their step 0 beside everyone's step t; the task steps them on at t
-        # as before (every t >= 1), which is discarded
+        # that one read gives their step 0 beside the others' step t. The task steps every env
+        # (its steps t >= 1 as ever); what it makes of the restarting ones is discarded below.
         fresh, read_t, synced = None, t, self._synced
         if mode == AutoresetMode.NEXT_STEP and self._autoreset.any():
             fresh = np.flatnonzero(self._autoreset)
@@ -267,9 +267,8 @@ class TrackingVectorEnv(VectorEnv):
             table = np.empty((len(values), self.num_envs), dtype=np.float32)
             for row, value in zip(table, values, strict=True):
                 row[...] = value
-        if fresh is not None:  # the first observations of the restarts (refs (channels, 1) where shared)
-            first = refs[:, fresh] if refs.shape[1] == self.num_envs else refs.repeat(len(fresh), axis=1)
-            table[:, fresh] = task.initial_observation(first, drawn[:, fresh])
+        if fresh is not None:  # the restarts' first observations (refs a column per env: read unsynced)
+            table[:, fresh] = task.initial_observation(refs[:, fresh], drawn[:, fresh])
         # into the observation bounds, as the scalar envs do: one pass over the table
         CLIP_UFUNC(table, self._low_col, self._high_col, out=table)
         obs = table.T
