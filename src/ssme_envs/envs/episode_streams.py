@@ -92,8 +92,11 @@ def _kernel_agrees(kernel: object) -> bool:
     cursors = np.zeros((n, STREAM_WORDS), dtype=np.uint64)
     cursors[:, 0] = _UNSET
     codes = np.array(layout[:5], dtype=np.int64)
-    # a restart, steps on by one, repeated, skipped, past half (sines) and across holds
-    steps = ((0, 0, 0, 0), (1, 0, 2, 5), (2, 1, 3, 6), (3, 9, 3, 7), (13, 10, 4, 8), (6, 11, 12, 13))
+    # a restart, a step on by one of all envs at one step, steps on by one, repeated, skipped,
+    # past half (sines) and across holds
+    steps = (
+        (0, 0, 0, 0), (1, 1, 1, 1), (1, 0, 2, 5), (2, 1, 3, 6), (3, 9, 3, 7), (13, 10, 4, 8), (6, 11, 12, 13)
+    )  # fmt: skip
     for row, at in enumerate(steps):
         fresh, t = row == 0, np.array(at, dtype=np.int64)
         got = np.empty(n), np.empty(n, np.float32), np.empty(n, np.float32)

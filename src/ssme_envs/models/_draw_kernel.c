@@ -288,16 +288,19 @@ static PyObject *streams(PyObject *self, PyObject *const *args, Py_ssize_t nargs
         PyErr_SetString(PyExc_ValueError, "streams: layout (half, refs_at, holds, shortest, longest) out of range");
         goto done;
     }
-    for (Py_ssize_t j = 0; j < k; j++)
+    int synced = 1;
+    for (Py_ssize_t j = 0; j < k; j++) {
         if (t[j] < 0 || t[j] >= 2 * l.half) {
             PyErr_Format(PyExc_ValueError, "streams: step %lld outside 0..%lld", (long long)t[j],
                          (long long)(2 * l.half - 1));
             goto done;
         }
+        synced &= t[j] == t[0];
+    }
     Jumps jumps = {.used = 0};
     Py_ssize_t sines = 0;
     for (Py_ssize_t j = 0; j < k; j++) {
-        stream_step(cursors + STREAM_WORDS * envs[j], origins + ORIGIN * envs[j], t[j], fresh, &l, &jumps,
+        stream_step(cursors + STREAM_WORDS * envs[j], origins + ORIGIN * envs[j], t[j], fresh, synced, &l, &jumps,
                     radius + j, angle + j, refs + j);
         sines += t[j] >= l.half;
     }

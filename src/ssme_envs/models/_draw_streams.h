@@ -72,9 +72,20 @@ static inline float number(const Cursor *c, const uint64_t *o)
 
 static inline void advance(Cursor *c, u128 inc)
 {
-    /* without branches: across a step's envs the flags are as good as random, and the mispredicted
-     * branches cost more than a multiplication the low half does not need (a sixth of a step's
-     * streams at N = 4096) */
+    if (c->flag == 0) {
+        c->flag = 1;
+        return;
+    }
+    c->s = MULTIPLIER * c->s + inc;
+    c->flag = 0;
+}
+
+/* advance without a branch: where a call's envs are at different steps their flags are as good
+ * as random, and the mispredicted branches cost more than the multiplication that the low half
+ * does not need (a sixth of the streams' step at N = 4096); where they are at one step, the
+ * branch is foreseen and the multiplication costs more */
+static inline void advance_unforeseen(Cursor *c, u128 inc)
+{
     const u128 next = MULTIPLIER * c->s + inc;
     const uint64_t move = (uint64_t)0 - (uint64_t)(c->flag != 0);
     const u128 keep = ((u128)~move << 64) | ~move;
@@ -152,9 +163,10 @@ static void find_hold(uint64_t *w, const uint64_t *o, int64_t t, const Layout *l
 
 /* One env at step t: its radius and angle uniforms (row t of normal_rows: u_t and u_half+t, or
  * u_t-half and u_t from t = half on) and its reference; the cursors move on from the step they
- * hold where t is that step or the next, and are sought from the origin otherwise (or fresh). */
-static inline void stream_step(uint64_t *w, const uint64_t *o, int64_t t, int fresh, const Layout *l,
-                               Jumps *jumps, float *radius, float *angle, double *ref)
+ * hold where t is that step or the next, and are sought from the origin otherwise (or fresh);
+ * synced: every env of the call at one step. */
+static inline void stream_step(uint64_t *w, const uint64_t *o, int64_t t, int fresh, int synced,
+                               const Layout *l, Jumps *jumps, float *radius, float *angle, double *ref)
 {
     Cursor r, a;
     const int64_t held = (int64_t)w[AT];
@@ -165,8 +177,13 @@ static inline void stream_step(uint64_t *w, const uint64_t *o, int64_t t, int fr
         const u128 inc = join(w[INC_LO], w[INC_HI]);
         r = load(w + R_LO, w[FLAGS] & 3);
         a = load(w + A_LO, w[FLAGS] >> 2);
-        advance(&r, inc);
-        advance(&a, inc);
+        if (synced) {
+            advance(&r, inc);
+            advance(&a, inc);
+        } else {
+            advance_unforeseen(&r, inc);
+            advance_unforeseen(&a, inc);
+        }
     } else {
         const int cosine = t < l->half;
         r = seek(o, (uint64_t)(cosine ? t : t - l->half), jumps);
