@@ -182,11 +182,11 @@ class TrackingVectorEnv(VectorEnv):
 
     def _reset_state(self, envs: np.ndarray, plants: np.ndarray | None) -> None:
         """The initial state in the given envs, their plants drawn from ``plants``."""
-        fresh = self.task.initial_state(len(envs), plants)
+        initial = self.task.initial_state(len(envs), plants)
         if len(envs) == self.num_envs:
-            self._state = fresh
+            self._state = initial
         else:
-            set_columns(self._state, fresh, envs)
+            set_columns(self._state, initial, envs)
 
     def reset(
         self, *, seed: int | Sequence[int | None] | None = None, options: Mapping[str, Any] | None = None
