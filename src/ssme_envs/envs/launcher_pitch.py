@@ -185,6 +185,11 @@ class LauncherTask:
             return LauncherState((0.0, 0.0, 0.0), 0.0, 0.0, 0.0, 0.0, joint)
         return LauncherState(np.zeros((3, n)), *(np.zeros(n) for _ in range(4)), joint)
 
+    @property
+    def observes_restarts(self) -> bool:
+        """As the nozzle task's :attr:`~ssme_envs.envs.nozzle_task.NozzleTask.observes_restarts`."""
+        return score_kernel(measured=False) is not None
+
     def initial_observation(self, ref: np.ndarray, draws: np.ndarray) -> np.ndarray:
         """Observations at reset (7, N) float32 from the first reference and noise rows (1, N)."""
         m = self.nozzle.measure(0.0, np.asarray(draws[0], dtype=np.float64), 0, SYNCED)
@@ -208,7 +213,7 @@ class LauncherTask:
         params = self.rk4_params if joint is None else joint
         nozzle, theta, q = self.plant_step(nozzle, theta, q, drive, gain, params, ops)
         if ops.batched and (kernel := score_kernel(measured=False)) is not None:  # the rest in one pass
-            args = (theta, a, prev, t, ref, noise[0], integral, q, nozzle[0])
+            args = (theta, a, prev, t, ref, noise[0], integral, q, nozzle[0], ops.restarting)
             values, reward, terminated = score_observe(kernel, self.score_config, *args)
             return LauncherState(nozzle, theta, q, integral, prev, joint), values, reward, terminated
         m, e, integral, reward, terminated = self.nozzle.score(

@@ -57,17 +57,19 @@ def score_config(task: NozzleTask, rate_scale: float, measured: bool) -> np.ndar
 def score_observe(
     kernel: Any, config: np.ndarray, x: np.ndarray, a: np.ndarray, prev: np.ndarray, t: np.ndarray,
     ref: np.ndarray, noise: np.ndarray, integral: np.ndarray, rate: np.ndarray, extra: np.ndarray | None,
+    restarting: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
     """What follows the tracked output x (rad, (N,)) in a batch step: the observation columns
     (6, or 7 with ``extra``, N) float32, reward and terminated (fresh arrays); ``prev`` (<- a),
     ``integral`` and, where the config measures the rate, ``rate`` (<- the measurement) are
-    stepped in place."""
+    stepped in place. Where ``restarting`` (a bool (N,) row) is True: the task's first
+    observation of that ref and noise (its ``initial_observation``), reward 0, not terminated."""
     n = len(t)
     values = np.empty((7 if extra is not None else 6, n), dtype=np.float32)
     reward, terminated = np.empty(n), np.empty(n, dtype=bool)
     kernel.score_batch(
         x, np.ascontiguousarray(a), prev, t, np.ascontiguousarray(ref), np.ascontiguousarray(noise),
-        integral, rate, extra, values, reward, terminated, config,
+        integral, rate, extra, values, reward, terminated, config, restarting,
     )  # fmt: skip
     return values, reward, terminated
 
@@ -83,7 +85,8 @@ def score_kernel(measured: bool) -> Any:
 def _kernel_agrees(kernel: Any, measured: bool) -> bool:
     """Whether ``score_batch`` gives, env by env, what the task's float step gives after its
     plant: a sensor bias on and off, an integral clipped both ways, envs ended by the
-    envelope (with their penalty) and a NaN output."""
+    envelope (with their penalty) and a NaN output; and for restarting envs what the task's
+    ``initial_observation`` gives, the bias on at step 0 and off."""
     from ssme_envs.envs.launcher_pitch import LAUNCHER_DT, LauncherState, LauncherTask
     from ssme_envs.envs.nozzle_task import NOZZLE_DT, NozzleState, NozzleTask
     from ssme_envs.envs.task import FLOATS
@@ -124,6 +127,15 @@ def _kernel_agrees(kernel: Any, measured: bool) -> bool:
     same &= _same_bits(prev, a)
     if measured:
         same &= _same_bits(rate, np.array([s.m_prev for s in states]))
+    for bias_time in (0.0, 5 * dt):  # restarting envs (the odd ones): their first observations
+        task = build(fault={**fault, "time": bias_time}, sensor_noise=0.003)
+        restarting = np.arange(len(t)) % 2 == 1
+        values, reward, terminated = score_observe(
+            kernel, task.score_config, *args[1:], restarting=restarting
+        )  # fmt: skip
+        first = task.initial_observation(ref[None, restarting], noise[None, restarting])
+        same &= _same_bits(values[:, restarting], first)
+        same &= not reward[restarting].any() and not terminated[restarting].any()
     return bool(same)
 
 

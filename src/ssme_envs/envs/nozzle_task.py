@@ -321,6 +321,12 @@ class NozzleTask:
             )  # fmt: skip
         return self.spread.rk4(plants, self.rk4_params.hysteretic, n)
 
+    @property
+    def observes_restarts(self) -> bool:
+        """Whether the batched step writes restarting envs' first observations (the compiled
+        scoring does: :class:`~ssme_envs.envs.task.TrackingTask`)."""
+        return score_kernel(measured=True) is not None
+
     def initial_observation(self, ref: np.ndarray, draws: np.ndarray) -> np.ndarray:
         """Observations at reset (6, N) float32 from the first reference and noise rows (1, N)."""
         m = self.measure(0.0, np.asarray(draws[0], dtype=np.float64), 0, SYNCED)
@@ -359,7 +365,7 @@ class NozzleTask:
         params = self.rk4_params if joint is None else joint
         plant = integrate(plant, torque, self.dt / self.substeps, self.substeps, params, ops)
         if ops.batched and (kernel := score_kernel(measured=True)) is not None:  # the rest in one pass
-            args = (plant[0], a, prev, t, ref, noise[0], integral, m_prev, None)
+            args = (plant[0], a, prev, t, ref, noise[0], integral, m_prev, None, ops.restarting)
             values, reward, terminated = score_observe(kernel, self.score_config, *args)
             return NozzleState(plant, torque, m_prev, integral, prev, joint), values, reward, terminated
         m, e, integral, reward, terminated = self.score(plant[0], a, prev, t, ref, noise[0], integral, ops)

@@ -9,6 +9,7 @@ and in a batch (the tests hold the vector env to gymnasium's ``SyncVectorEnv`` b
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -71,7 +72,10 @@ class Carrier:
     anywhere (to skip the passes of a rare branch); ``charge(values, cond, cost, t)``: ``values
     - cost(t)`` where ``cond`` holds, the values elsewhere (arrays: in place, ``cost`` computed
     on those entries alone); ``batched``: True for arrays, where a plant core with two carriers
-    of one arithmetic (``models``) picks its array one."""
+    of one arithmetic (``models``) picks its array one; ``restarting``: None, or (arrays, given
+    only to a task that ``observes_restarts``) a bool (N,) row, True for the envs that restart at
+    this step, whose ``ref`` and ``noise`` columns hold their new episodes' step 0 (see
+    :class:`TrackingTask`)."""
 
     batched: bool
     where: Callable[[Any, Any, Any], Any]
@@ -81,6 +85,11 @@ class Carrier:
     charge: Callable[[Any, Any, Callable[[Any], Any], Any], Any] = lambda values, cond, cost, t: (
         values - cost(t) if cond else values
     )
+    restarting: np.ndarray | None = None
+
+    def with_restarts(self, restarting: np.ndarray) -> Carrier:
+        """This carrier with ``restarting`` set."""
+        return dataclasses.replace(self, restarting=restarting)
 
 
 def _array_charge(
@@ -158,6 +167,11 @@ class TrackingTask(Protocol):
     :class:`~ssme_envs.envs.references.StreamLayout` says where each step's noise and reference
     lie in its draw: the vector env then makes each step's alone
     (:mod:`~ssme_envs.envs.episode_streams`), the same values as its ``episodes`` gives.
+    A task whose ``observes_restarts`` (optional) is True promises that its batched step, given a
+    carrier whose ``restarting`` is set, returns its values as a float32 table whose restarting
+    columns hold ``initial_observation`` of those columns' ``ref`` and ``noise``, with reward 0
+    and not terminated there; what it makes of their state is discarded. Otherwise the vector env
+    computes those first observations itself.
     """
 
     observation: Observation

@@ -112,6 +112,8 @@ class TrackingVectorEnv(VectorEnv):
         )  # bounds of the (columns, N) table
         # a task that scales float32 unit noise into float64 itself is handed it as drawn
         self._noise_as_drawn = getattr(self.task, "scales_float32_noise", False)
+        # a task that writes restarting envs' first observations in its step is told which they are
+        self._observes_restarts = getattr(self.task, "observes_restarts", False)
         # whether the task ends episodes whose step went non-finite (None: it passes them on)
         self._ends_nonfinite = self.task.nonfinite_reward(np.zeros(1, dtype=np.int64)) is not None
         n = num_envs
@@ -245,7 +247,8 @@ class TrackingVectorEnv(VectorEnv):
         self._t_bound = min(self._t_bound + 1, task.horizon)
         # NEXT_STEP restarts draw their episodes before the step's episode values are read, so
         # that one read gives their step 0 beside the others' step t. The task steps every env
-        # (its steps t >= 1 as ever); what it makes of the restarting ones is discarded below.
+        # (its steps t >= 1 as ever); what it makes of the restarting ones' state is discarded
+        # below, and their observations are their first (the task's own where it observes them).
         fresh, read_t, synced = None, t, self._synced
         if mode == AutoresetMode.NEXT_STEP and self._autoreset.any():
             fresh = np.flatnonzero(self._autoreset)
@@ -256,8 +259,10 @@ class TrackingVectorEnv(VectorEnv):
             synced = False
         refs, drawn, self._t_bound = self._episodes.at(read_t, self._t_bound, synced)
         noise = drawn if self._noise_as_drawn else drawn.astype(np.float64)
+        ops = SYNCED if self._synced else GATHER
+        observed = fresh is not None and self._observes_restarts
         self._state, values, reward, terminated = task.step(
-            self._state, clipped, t, refs, noise, SYNCED if self._synced else GATHER
+            self._state, clipped, t, refs, noise, ops.with_restarts(self._autoreset) if observed else ops
         )
         # the observation values as rows of a float32 table, handed out transposed (N, columns): a
         # task's own fresh float32 table (the compiled engine step's), or one made here
@@ -267,7 +272,7 @@ class TrackingVectorEnv(VectorEnv):
             table = np.empty((len(values), self.num_envs), dtype=np.float32)
             for row, value in zip(table, values, strict=True):
                 row[...] = value
-        if fresh is not None:  # the restarts' first observations (refs a column per env: read unsynced)
+        if fresh is not None and not observed:  # the restarts' first observations (refs read unsynced)
             table[:, fresh] = task.initial_observation(refs[:, fresh], drawn[:, fresh])
         # into the observation bounds, as the scalar envs do: one pass over the table
         CLIP_UFUNC(table, self._low_col, self._high_col, out=table)

@@ -33,7 +33,8 @@ enum {
     CONFIG_SIZE
 };
 
-/* score_batch(x, a, prev, t, ref, noise, integral, rate, extra, values, reward, terminated, config)
+/* score_batch(x, a, prev, t, ref, noise, integral, rate, extra, values, reward, terminated, config
+ *             [, restarting])
  *
  * x: the tracked output (rad), a: the actions, t: the steps, ref (rad), noise: the unit noise,
  * all (N,). prev, integral and rate are stepped in place: prev <- a, the error integral (deg s,
@@ -41,12 +42,15 @@ enum {
  * difference over dt makes the rate column; else the rate column is rate (rad/s) in deg/s.
  * extra: None or (N,) in rad, a column in deg before the action's. values: (6 or 7, N) float32,
  * the observation columns (m, rate, ref, error, integral, [extra,] a) rounded; reward, terminated:
- * (N,), written. */
+ * (N,), written. restarting: None or a bool (N,) row, the envs whose ref and noise are their new
+ * episodes' step 0: their columns get the task's initial_observation (the measurement of a
+ * nozzle at rest at step 0; rate, integral, extra and action columns 0), reward 0, not ended,
+ * and their prev, integral and rate are left as they are (the caller resets them). */
 static PyObject *score_batch(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
-    if (nargs != 13) {
+    if (nargs != 13 && nargs != 14) {
         PyErr_SetString(PyExc_TypeError, "score_batch(x, a, prev, t, ref, noise, integral, rate, extra, values, "
-                                         "reward, terminated, config)");
+                                         "reward, terminated, config[, restarting])");
         return NULL;
     }
     Views v = {.count = 0};
@@ -67,7 +71,9 @@ static PyObject *score_batch(PyObject *self, PyObject *const *args, Py_ssize_t n
     double *reward = values ? take(&v, args[10], 8, "d", N, 1, "reward", NULL) : NULL;
     char *terminated = reward ? take(&v, args[11], 1, "?", N, 1, "terminated", NULL) : NULL;
     const double *config = terminated ? take(&v, args[12], 8, "d", CONFIG_SIZE, 0, "config", NULL) : NULL;
-    if (config == NULL)
+    const int has_restarts = config != NULL && nargs == 14 && args[13] != Py_None;
+    const char *restarting = has_restarts ? take(&v, args[13], 1, "?", N, 0, "restarting", NULL) : NULL;
+    if (config == NULL || (has_restarts && restarting == NULL))
         goto done;
     const double std = config[NOISE_STD], bias = config[BIAS], dt = config[DT], lim = config[LIMIT];
     const double low = -lim, ew = -config[ERROR_WEIGHT], rw = config[RATE_WEIGHT];
@@ -78,6 +84,20 @@ static PyObject *score_batch(PyObject *self, PyObject *const *args, Py_ssize_t n
     float *row_m = values, *row_rate = values + N, *row_ref = values + 2 * N, *row_e = values + 3 * N;
     float *row_int = values + 4 * N, *row_extra = values + 5 * N, *row_a = values + (rows - 1) * N;
     for (Py_ssize_t k = 0; k < N; k++) {
+        if (restarting != NULL && restarting[k]) { /* initial_observation's operations */
+            double m = 0.0 + noise[k] * std;
+            if (has_bias && 0 >= bias_step)
+                m = m + bias;
+            row_m[k] = (float)(m * deg);
+            row_ref[k] = (float)(ref[k] * deg);
+            row_e[k] = (float)((ref[k] - m) * deg);
+            row_rate[k] = row_int[k] = row_a[k] = 0.0f;
+            if (has_extra)
+                row_extra[k] = 0.0f;
+            reward[k] = 0.0;
+            terminated[k] = 0;
+            continue;
+        }
         double m = x[k] + noise[k] * std;
         if (has_bias && t[k] >= bias_step)
             m = m + bias;
