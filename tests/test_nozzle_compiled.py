@@ -140,6 +140,27 @@ def test_the_check_refuses_a_kernel_one_ulp_off() -> None:
 
 
 @compiled
+@pytest.mark.parametrize("measured", [True, False])
+def test_the_check_refuses_a_kernel_that_misses_the_restarts_first_observations(measured: bool) -> None:
+    """Restarting envs' columns are checked against the task's ``initial_observation``: a kernel
+    that steps them as the others, or rounds their error column one float32 ulp up, is refused."""
+
+    class Stepping:
+        def score_batch(self, *args):
+            KERNEL.score_batch(*args[:13])
+
+    class ErrorOff:
+        def score_batch(self, *args):
+            KERNEL.score_batch(*args)
+            values, restarting = args[9], args[13]
+            if restarting is not None:
+                values[3, restarting] = np.nextafter(values[3, restarting], np.float32(math.inf))
+
+    assert not nozzle_compiled._kernel_agrees(Stepping(), measured=measured)
+    assert not nozzle_compiled._kernel_agrees(ErrorOff(), measured=measured)
+
+
+@compiled
 @pytest.mark.parametrize(
     ("position", "bad", "message"),
     [
@@ -151,6 +172,8 @@ def test_the_check_refuses_a_kernel_one_ulp_off() -> None:
         (9, np.zeros((7, 4), dtype=np.float32), "values"),
         (11, np.zeros(4), "terminated"),
         (12, np.zeros(5), "config"),
+        (13, np.zeros(4), "restarting"),
+        (13, np.zeros(5, dtype=bool), "restarting"),
     ],
 )
 def test_the_kernel_names_a_bad_argument(position: int, bad: np.ndarray, message: str) -> None:
@@ -158,10 +181,10 @@ def test_the_kernel_names_a_bad_argument(position: int, bad: np.ndarray, message
     args = [
         np.zeros(n), np.zeros(n), np.zeros(n), np.ones(n, dtype=np.int64), np.zeros(n), np.zeros(n),
         np.zeros(n), np.zeros(n), None, np.zeros((6, n), dtype=np.float32), np.zeros(n),
-        np.zeros(n, dtype=bool), NozzleTask.build().score_config,
+        np.zeros(n, dtype=bool), NozzleTask.build().score_config, np.zeros(n, dtype=bool),
     ]  # fmt: skip
     args[position] = bad
     with pytest.raises((ValueError, BufferError), match=message):
         KERNEL.score_batch(*args)
     with pytest.raises(TypeError, match="score_batch"):
-        KERNEL.score_batch(*args[:-1])
+        KERNEL.score_batch(*args[:-2])
