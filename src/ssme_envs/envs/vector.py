@@ -128,7 +128,9 @@ class TrackingVectorEnv(VectorEnv):
         self._rows = np.arange(n)
         self._state = self.task.initial_state(n)
         # NEXT_STEP: restart at the next step; DISABLED: the episode is over until a reset
-        self._autoreset = np.full(n, mode == AutoresetMode.DISABLED)
+        self._autoreset = np.full(n, mode == AutoresetMode.DISABLED)  # written in place only
+        # the carriers (gathered, synced) that name the restarting envs, read from _autoreset
+        self._restarting = (GATHER.with_restarts(self._autoreset), SYNCED.with_restarts(self._autoreset))
         self._obs = np.zeros((n, *self.single_observation_space.shape), dtype=np.float32)  # last returned
         self._unstarted = np.ones(n, dtype=bool)  # sub-envs never reset
         self._started = False  # every sub-env reset at least once
@@ -259,11 +261,9 @@ class TrackingVectorEnv(VectorEnv):
             synced = False
         refs, drawn, self._t_bound = self._episodes.at(read_t, self._t_bound, synced)
         noise = drawn if self._noise_as_drawn else drawn.astype(np.float64)
-        ops = SYNCED if self._synced else GATHER
         observed = fresh is not None and self._observes_restarts
-        self._state, values, reward, terminated = task.step(
-            self._state, clipped, t, refs, noise, ops.with_restarts(self._autoreset) if observed else ops
-        )
+        ops = self._restarting[self._synced] if observed else SYNCED if self._synced else GATHER
+        self._state, values, reward, terminated = task.step(self._state, clipped, t, refs, noise, ops)
         # the observation values as rows of a float32 table, handed out transposed (N, columns): a
         # task's own fresh float32 table (the compiled engine step's), or one made here
         if isinstance(values, np.ndarray) and values.dtype == np.float32:
@@ -294,10 +294,10 @@ class TrackingVectorEnv(VectorEnv):
                 reward[fresh] = 0.0
                 terminated[fresh] = False
                 truncated[fresh] = False
-            self._autoreset = terminated | truncated
+            np.logical_or(terminated, truncated, out=self._autoreset)
             infos = step_infos
         elif mode == AutoresetMode.DISABLED:
-            self._autoreset = terminated | truncated
+            np.logical_or(terminated, truncated, out=self._autoreset)
             infos = step_infos
         else:
             mask = terminated | truncated
