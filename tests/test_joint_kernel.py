@@ -185,6 +185,32 @@ def test_a_substituted_integrator_gets_the_python_servo_loop(monkeypatch) -> Non
     assert launcher_servo.compiled_servo(batched=True) is nozzle_joint._KERNEL
 
 
+@compiled
+def test_a_kernel_that_reads_one_joint_for_every_nozzle_is_refused(monkeypatch) -> None:
+    """The import check holds the per-nozzle joints (drawn plants) apart from the shared one: a
+    kernel that steps every nozzle of a batch with the first one's joint is not used."""
+    monkeypatch.delenv("SSME_ENVS_NO_KERNEL", raising=False)
+    real = nozzle_joint._KERNEL
+
+    def first_joint_for_all(state, tau, h, steps, p):
+        if isinstance(p.n, np.ndarray):
+            p = p._replace(**{k: v[0] for k, v in p._asdict().items() if isinstance(v, np.ndarray)})
+        real.rk4_batch(state, tau, h, steps, p)
+
+    fake = types.ModuleType("ssme_envs.models._joint_kernel")
+    fake.set_tables, fake.power, fake.rk4_float = real.set_tables, real.power, real.rk4_float
+    fake.servo_float, fake.servo_batch = real.servo_float, real.servo_batch
+    fake.rk4_batch = first_joint_for_all
+    monkeypatch.setitem(sys.modules, "ssme_envs.models._joint_kernel", fake)
+    monkeypatch.setattr(sys.modules["ssme_envs.models"], "_joint_kernel", fake, raising=False)
+    with pytest.warns(RuntimeWarning, match="differs from its reference"):
+        assert nozzle_joint._load_kernel() is None
+    fake.rk4_batch = real.rk4_batch
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert nozzle_joint._load_kernel() is fake
+
+
 def test_a_build_of_an_older_source_is_refused(monkeypatch) -> None:
     """A kernel without the calls this source makes (a stale build) warns and is not used."""
     monkeypatch.delenv("SSME_ENVS_NO_KERNEL", raising=False)

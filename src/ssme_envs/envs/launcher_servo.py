@@ -87,9 +87,13 @@ def servo_batch(
 @functools.cache
 def _kernel_agrees() -> bool:
     """Whether the kernel's servo gives the reference's bits on a check set (a strong joint
-    through a saturating torque and a fault's gain, one launcher and a batch); a warning if not."""
+    through a saturating torque and a fault's gain, one launcher and a batch, whose joint is
+    shared and per launcher); a warning if not."""
     kernel = nozzle_joint._KERNEL
     joint = nozzle_joint.rk4_parameters(nozzle_joint.strong_nozzle().normalized())
+    per_nozzle = joint._replace(
+        **{name: np.full(2, value) for name, value in joint._asdict().items() if name != "hysteretic"}
+    )
     servo, body = (3.2e5, 1.6e5, 900.0), (1.0, 0.02, 0.06, 1.0, 5e-4, 0.1, 5e-4, 0.1)
     start = [(0.01, 0.5, 0.004, 0.02, -0.1, 4e3, None), (-0.02, -1.0, 0.0, 0.0, 0.3, -9e3, 0.5)]
     agree = True
@@ -97,9 +101,12 @@ def _kernel_agrees() -> bool:
         args = (theta, q, drive, gain, servo, 3e4, body, 1e-3, 2, 10, joint)
         reference = servo_floats(x, v, w, *args, nozzle_joint._rk4_floats_py)
         agree &= kernel.servo_float(x, v, w, *args) == reference
-        state = np.array([[x, x], [v, v], [w, w]])
-        batch = servo_batch(kernel, state, np.full(2, theta), np.full(2, q), *args[2:])
-        agree &= batch is not None and np.array_equal(np.vstack([state, *batch]), np.array([reference] * 2).T)
+        for p in (joint, per_nozzle):  # one joint for all, and one per launcher (drawn plants)
+            state = np.array([[x, x], [v, v], [w, w]])
+            batch = servo_batch(kernel, state, np.full(2, theta), np.full(2, q), *args[2:-1], p)
+            agree &= batch is not None and np.array_equal(
+                np.vstack([state, *batch]), np.array([reference] * 2).T
+            )
     if not agree:
         warnings.warn(
             "ssme_envs: the compiled launcher servo differs from its reference and is not used",

@@ -127,15 +127,23 @@ static inline void rk4_step_hysteretic(double *px, double *pv, double *pw, doubl
 }
 
 /* `steps` RK4 steps of `len` (<= BLOCK) nozzles: state rows x, v, w; per-nozzle values in
- * rows of `cols` (tau and the joint's eight parameters); steps outermost and one loop per joint
- * kind, so that the loop over nozzles is the one the compiler vectorizes */
-static void CLONES rk4_block(double *restrict x, double *restrict v, double *restrict w,
-                             double (*restrict cols)[BLOCK], Py_ssize_t len, double h, long steps, int hys)
+ * rows of `cols` (tau and the joint's eight parameters), or the joint `shared` by every nozzle
+ * (NULL: none), held in registers instead of eight loads a lane and stage; steps outermost and
+ * one loop per joint kind, so that the loop over nozzles is the one the compiler vectorizes.
+ * Inlined into rk4_block with `shared` NULL or not, so that each form is compiled on its own. */
+static inline __attribute__((always_inline)) void rk4_lanes(double *restrict x, double *restrict v,
+                                                            double *restrict w, double (*restrict cols)[BLOCK],
+                                                            Py_ssize_t len, double h, long steps, int hys,
+                                                            const Joint *shared)
 {
     double accel0[BLOCK];
+    const Joint one = shared != NULL ? *shared : (Joint){0};
     for (Py_ssize_t i = 0; i < len; i++)
         accel0[i] = cols[0][i] * cols[1][i];
-#define JOINT_AT(i) {cols[1][i], cols[2][i], cols[3][i], cols[4][i], cols[5][i], cols[6][i], cols[7][i], cols[8][i]}
+#define JOINT_AT(i)                                                                                                 \
+    (shared != NULL ? one                                                                                       \
+                    : (Joint){cols[1][i], cols[2][i], cols[3][i], cols[4][i], cols[5][i], cols[6][i], cols[7][i], \
+                              cols[8][i]})
     if (hys) {
         /* rk4_step_hysteretic's operations, one loop per RK4 stage (one power each) with the
          * stage values kept in L1 between loops: a fused loop of four powers spills registers */
@@ -145,7 +153,7 @@ static void CLONES rk4_block(double *restrict x, double *restrict v, double *res
             for (int k = 0; k < 4; k++) {
                 const double *xk = k ? xs : x, *vk = k ? vel[k] : v, *wk = k ? ws : w;
                 for (Py_ssize_t i = 0; i < len; i++) {
-                    Joint p = JOINT_AT(i);
+                    const Joint p = JOINT_AT(i);
                     double xi = xk[i], vi = vk[i], wi = wk[i];
                     acc[k][i] = accel0[i] - p.b_j * vi - p.k_el_j * xi - p.k_hys_j * wi;
                     rate[k][i] = bouc_wen_rate(vi, wi, &p);
@@ -170,11 +178,21 @@ static void CLONES rk4_block(double *restrict x, double *restrict v, double *res
     } else {
         for (long s = 0; s < steps; s++)
             for (Py_ssize_t i = 0; i < len; i++) {
-                Joint p = JOINT_AT(i);
+                const Joint p = JOINT_AT(i);
                 rk4_step_linear(&x[i], &v[i], &w[i], accel0[i], h, &p);
             }
     }
 #undef JOINT_AT
+}
+
+static void CLONES rk4_block(double *restrict x, double *restrict v, double *restrict w,
+                             double (*restrict cols)[BLOCK], Py_ssize_t len, double h, long steps, int hys,
+                             const Joint *shared)
+{
+    if (shared != NULL)
+        rk4_lanes(x, v, w, cols, len, h, steps, hys, shared);
+    else
+        rk4_lanes(x, v, w, cols, len, h, steps, hys, NULL);
 }
 
 /* The launcher's nozzle servo (launcher_servo.servo_floats and LauncherTask.plant_step's array loop),
@@ -186,7 +204,7 @@ static void CLONES servo_block(double *restrict x, double *restrict v, double *r
                                double *restrict q, const double *restrict drive, const double *restrict gain,
                                const double *restrict servo, const double *restrict body,
                                double (*restrict cols)[BLOCK], Py_ssize_t len, double h, long steps,
-                               long samples, int hys)
+                               long samples, int hys, const Joint *shared)
 {
     double theta_next[BLOCK], q_next[BLOCK];
     const double k_p = servo[0], k_d = servo[1], lim = servo[2], low = -lim;
@@ -202,7 +220,7 @@ static void CLONES servo_block(double *restrict x, double *restrict v, double *r
         if (gain != NULL)
             for (Py_ssize_t i = 0; i < len; i++)
                 cols[0][i] = cols[0][i] * gain[i];
-        rk4_block(x, v, w, cols, len, h, steps, hys);
+        rk4_block(x, v, w, cols, len, h, steps, hys, shared);
         for (Py_ssize_t i = 0; i < len; i++) {
             theta[i] = theta_next[i] + body[6] * x[i];
             q[i] = q_next[i] + body[7] * x[i];

@@ -67,6 +67,18 @@ static void column_fill(const Column *col, double *dst, Py_ssize_t start, Py_ssi
             dst[i] = col->value;
 }
 
+/* the joint of eight numbers (inv_j ... w_floor) where none of its columns is a vector: into *one,
+ * returned; NULL where any is */
+static const Joint *shared_joint(const Column *joint, Joint *one)
+{
+    for (int c = 0; c < 8; c++)
+        if (joint[c].is_view)
+            return NULL;
+    *one = (Joint){joint[0].value, joint[1].value, joint[2].value, joint[3].value,
+                   joint[4].value, joint[5].value, joint[6].value, joint[7].value};
+    return one;
+}
+
 static int read_joint(PyObject *p, PyObject **items, int *hys)
 {
     if (!PyTuple_Check(p) || PyTuple_GET_SIZE(p) != 9) {
@@ -177,11 +189,13 @@ static PyObject *rk4_batch(PyObject *self, PyObject *const *args, Py_ssize_t nar
     if (opened == 9) {
         double *rows = (double *)state.buf;
         double block[9][BLOCK];
+        Joint one;
+        const Joint *shared = shared_joint(cols + 1, &one);
         for (Py_ssize_t start = 0; start < n; start += BLOCK) {
             Py_ssize_t len = n - start < BLOCK ? n - start : BLOCK;
             for (int c = 0; c < 9; c++)
                 column_fill(&cols[c], block[c], start, len);
-            rk4_block(rows + start, rows + n + start, rows + 2 * n + start, block, len, h, steps, hys);
+            rk4_block(rows + start, rows + n + start, rows + 2 * n + start, block, len, h, steps, hys, shared);
         }
     }
     for (int c = 0; c < opened; c++)
@@ -304,6 +318,8 @@ static PyObject *servo_batch(PyObject *self, PyObject *const *args, Py_ssize_t n
     if (ok) {
         double *x = (double *)state.buf, *theta = (double *)rows[0].buf, *q = (double *)rows[1].buf;
         double block[9][BLOCK], drive[BLOCK], gain[BLOCK];
+        Joint one;
+        const Joint *shared = shared_joint(cols + 2, &one);
         for (Py_ssize_t start = 0; start < n; start += BLOCK) {
             Py_ssize_t len = n - start < BLOCK ? n - start : BLOCK;
             column_fill(&cols[0], drive, start, len);
@@ -312,7 +328,7 @@ static PyObject *servo_batch(PyObject *self, PyObject *const *args, Py_ssize_t n
             for (int c = 0; c < 8; c++)
                 column_fill(&cols[2 + c], block[1 + c], start, len);
             servo_block(x + start, x + n + start, x + 2 * n + start, theta + start, q + start, drive,
-                        has_gain ? gain : NULL, sb, sb + 3, block, len, h, steps, samples, hys);
+                        has_gain ? gain : NULL, sb, sb + 3, block, len, h, steps, samples, hys, shared);
         }
     }
     for (int c = 0; c < opened; c++)
