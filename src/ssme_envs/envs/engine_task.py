@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -29,6 +30,7 @@ from ssme_envs.envs.task import (
     Value,
     check_number,
     check_numbers,
+    envelope_penalty,
 )
 from ssme_envs.models import engine_step
 from ssme_envs.models.engine import TruthConfig
@@ -359,7 +361,7 @@ class EngineTask:
         reward = -self.error_weight * (e0 * e0 + e1 * e1) - self.rate_weight * (d0 * d0 + d1 * d1)
         terminated = (abs(y0 - r0) > self.envelope) | (abs(y1 - r1) > self.envelope)
         if ops.any(terminated):  # the penalty's passes only on the (rare) steps that need them
-            reward = ops.charge(reward, terminated, self._envelope_penalty, t)
+            reward = ops.charge(reward, terminated, functools.partial(envelope_penalty, self), t)
         obs = (100.0 * m[0], 100.0 * m[1], 100.0 * r0, 100.0 * r1, e0, e1, i0, i1, a0, a1)
         return EngineState(plant, (i0, i1), (a0, a1), held), obs, reward, terminated
 
@@ -373,10 +375,6 @@ class EngineTask:
         zeros = np.zeros_like(m)
         obs = np.concatenate([100.0 * m, 100.0 * ref, 100.0 * (ref - m), zeros, zeros], axis=0)
         return obs.astype(np.float32)
-
-    def _envelope_penalty(self, t: Any) -> Any:
-        """What leaving the envelope at step t costs: the worst reward of the steps it skips."""
-        return self.step_cost_bound * (self.horizon - t + 1)
 
     def nonfinite_reward(self, t: Any) -> None:
         """None: an engine step's values are passed on as they are (unstable plants are refused)."""

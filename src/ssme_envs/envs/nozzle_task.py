@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -30,6 +31,7 @@ from ssme_envs.envs.task import (
     Uniforms,
     Value,
     check_number,
+    envelope_penalty,
     shown,
 )
 from ssme_envs.models.nozzle import (
@@ -385,12 +387,8 @@ class NozzleTask:
         terminated = abs(x) > self.envelope
         reward = -self.error_weight * (e * e) - self.rate_weight * (d * d)
         if ops.any(terminated):  # the penalty's passes only on the steps that need them
-            reward = ops.charge(reward, terminated, self._envelope_penalty, t)
+            reward = ops.charge(reward, terminated, functools.partial(envelope_penalty, self), t)
         return m, e, integral, reward, terminated
-
-    def _envelope_penalty(self, t: Any) -> Any:
-        """What leaving the envelope at step t costs: the worst reward of the steps it skips."""
-        return self.step_cost_bound * (self.horizon - t + 1)
 
     def nonfinite_reward(self, t: Any) -> Any:
         """The reward of step ``t`` (an int or an int array) whose own reward came out NaN or

@@ -218,6 +218,12 @@ def next_stop(ready: int, length: int) -> int:
     return min(length, max(FIRST_STEPS, 2 * ready))
 
 
+def envelope_penalty(task: Any, t: Any) -> Any:
+    """What leaving the envelope at step t costs a task (its ``step_cost_bound`` and ``horizon``):
+    the worst reward of the steps it skips."""
+    return task.step_cost_bound * (task.horizon - t + 1)
+
+
 def set_columns(state: Any, fresh: Any, envs: np.ndarray) -> None:
     """Write the columns (last axis) ``envs`` of every array of a nested state tuple (entries
     that are not arrays, such as None or a flag, are the same for every env)."""
@@ -302,6 +308,7 @@ __all__ = [
     "Uniforms",
     "check_number",
     "check_numbers",
+    "envelope_penalty",
     "next_stop",
     "real_number",
     "set_columns",
