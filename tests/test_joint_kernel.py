@@ -11,6 +11,7 @@ import math
 import sys
 import types
 import warnings
+from fractions import Fraction
 
 import numpy as np
 import pytest
@@ -21,7 +22,7 @@ from hypothesis import strategies as st
 import ssme_envs  # noqa: F401  (registers the environments)
 from ssme_envs.envs import launcher_pitch, launcher_servo, nozzle_task
 from ssme_envs.models import nozzle_joint
-from ssme_envs.models.joint_power import power_array, power_float
+from ssme_envs.models.joint_power import power_array, power_float, tables
 from ssme_envs.models.nozzle_joint import NozzleParameters, rk4_parameters
 
 LAUNCHER = "ssme_envs/LauncherPitch-v0"
@@ -77,6 +78,22 @@ def test_power_keeps_inf_and_nan_and_saturates_at_the_ends() -> None:
 @given(x=bases, n=exponents)
 def test_kernel_power_has_the_reference_bits(x: float, n: float) -> None:
     assert nozzle_joint._KERNEL.power(x, n) == power_float(x, n)
+
+
+def test_the_inverse_table_is_the_correctly_rounded_quotient() -> None:
+    """The reference reads 1/c from a table where the kernel divides: both are 1/c rounded once
+    (checked here against exact rational arithmetic)."""
+    inv_c = tables()[0]
+    assert inv_c == tuple(float(1 / Fraction(1 + (i + 0.5) / 128)) for i in range(128))
+
+
+@compiled
+def test_the_kernel_refuses_an_inverse_table_it_would_not_compute() -> None:
+    inv_c, log_c, exp2 = tables()
+    off = (*inv_c[:5], math.nextafter(inv_c[5], 2.0), *inv_c[6:])
+    with pytest.raises(ValueError, match=r"inv_c\[5\] is not 1.0 / c"):
+        nozzle_joint._KERNEL.set_tables(off, log_c, exp2)
+    assert nozzle_joint._KERNEL.power(1.04, 1.5) == power_float(1.04, 1.5)  # its tables kept
 
 
 @compiled

@@ -16,8 +16,10 @@
 static inline double from_bits(uint64_t u) { double d; memcpy(&d, &u, sizeof d); return d; }
 static inline uint64_t to_bits(double d) { uint64_t u; memcpy(&u, &d, sizeof u); return u; }
 
-/* joint_power.tables(), set once by set_tables before any use */
-static double inv_c[128], log_c[128], exp2_table[64];
+/* joint_power.tables()'s log c and 2^(j/64), set once by set_tables before any use (its 1/c is
+ * the IEEE quotient 1.0 / c, which the power computes: a division costs less than a table read
+ * in the vector loops, where each lane's read is emulated) */
+static double log_c[128], exp2_table[64];
 static int tables_set = 0;
 
 /* x^n for a positive normal x, whose exponent field less `bias` is e in x = m 2^e, m in [1, 2) */
@@ -34,7 +36,7 @@ static inline double power_parts(double x, double n, double bias)
     double m = from_bits(mantissa | 0x3ff0000000000000ULL);
     double c = from_bits((mantissa & 0x000fe00000000000ULL) | 0x3ff0100000000000ULL); /* 1 + (i + 1/2)/128 */
     double e = from_bits((bits >> 52) | 0x4330000000000000ULL) - (two52 + bias);
-    double r = (m - c) * inv_c[i];
+    double r = (m - c) * (1.0 / c);
     double log1p =
         r + r * r * (-0.5 + r * (0x1.5555555555555p-2 + r * (-0.25 + r * (0.2 + r * -0x1.5555555555555p-3))));
     double y = n * ((e * ln2_hi + log_c[i]) + (e * ln2_lo + log1p));

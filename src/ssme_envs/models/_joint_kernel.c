@@ -358,15 +358,24 @@ static int fill(PyObject *seq, double *dst, Py_ssize_t n)
     return ok ? 0 : -1;
 }
 
-/* set_tables(inv_c, log_c, exp2): joint_power.tables(), once */
+/* set_tables(inv_c, log_c, exp2): joint_power.tables(), once; inv_c must be what the power
+ * computes in its place, 1.0 / c for the cell centres c */
 static PyObject *set_tables(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
+    double inv[128], log[128], exp2[64];
     if (nargs != 3) {
         PyErr_SetString(PyExc_TypeError, "set_tables(inv_c, log_c, exp2)");
         return NULL;
     }
-    if (fill(args[0], inv_c, 128) < 0 || fill(args[1], log_c, 128) < 0 || fill(args[2], exp2_table, 64) < 0)
+    if (fill(args[0], inv, 128) < 0 || fill(args[1], log, 128) < 0 || fill(args[2], exp2, 64) < 0)
         return NULL;
+    for (int i = 0; i < 128; i++)
+        if (to_bits(inv[i]) != to_bits(1.0 / (1.0 + (i + 0.5) / 128.0))) {
+            PyErr_Format(PyExc_ValueError, "inv_c[%d] is not 1.0 / c for the centre c of cell %d", i, i);
+            return NULL;
+        }
+    memcpy(log_c, log, sizeof log);
+    memcpy(exp2_table, exp2, sizeof exp2);
     tables_set = 1;
     Py_RETURN_NONE;
 }

@@ -4,13 +4,15 @@ Neither library power serves both carriers of the joint's RK4 (:mod:`ssme_envs.m
 the C library's ``pow`` is fast on one float but has no SIMD loop, numpy's SIMD power is fast on
 arrays but differs from it in the last bit and costs 0.5 us on one float
 (``experiments/results/speed_limits.md``). This power is ``exp(n log x)`` built from IEEE additions,
-multiplications, table lookups and exact scalings only (no division, no fused multiply-add), so
+multiplications, table lookups (or the one correctly rounded quotient a table holds, ``1/c``)
+and exact scalings only (no fused multiply-add), so
 any implementation that performs them in this order gets the same bits: these two (Python
 floats, numpy arrays) and the compiled kernel (``_joint_kernel.c``, which receives the tables
 from :func:`tables`), which the tests hold to them bit for bit.
 
 - ``log x``: ``x = m 2^e``, ``m`` in ``[1, 2)``; ``c`` the centre of ``m``'s 1/128-wide cell,
-  ``r = (m - c) / c`` (``m - c`` exact, times a table of ``1/c``), ``log m = log c + log1p r``,
+  ``r = (m - c) / c`` (``m - c`` exact, times ``1/c``: a table here, the same IEEE quotient
+  computed in the compiled kernel), ``log m = log c + log1p r``,
   ``log1p r`` by its series to ``r^6`` (``|r| <= 1/257``: truncation below 2e-18);
   ``e log 2`` in two parts (``LN2_HI`` has 32 significant bits, so ``e LN2_HI`` is exact).
 - ``exp y``: ``y = (64 q + j) log(2)/64 + r``, ``|r| <= log(2)/128``, ``q`` and ``j`` from one
