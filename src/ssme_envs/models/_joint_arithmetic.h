@@ -22,11 +22,15 @@ static inline uint64_t to_bits(double d) { uint64_t u; memcpy(&u, &d, sizeof u);
 static double log_c[128], exp2_table[64];
 static int tables_set = 0;
 
-/* x^n for a positive normal x, whose exponent field less `bias` is e in x = m 2^e, m in [1, 2) */
-static inline double power_parts(double x, double n, double bias)
+/* x^n in two halves: power_log takes a positive normal x (whose exponent field less `bias` is
+ * e in x = m 2^e, m in [1, 2)) to t = y 64/log(2) + 1.5 2^52 (y = n log x, clipped; its low bits
+ * hold j) and the reduced argument r; power_exp takes them to exp(y). The batch loops run
+ * them as two passes, so that each pass's dependency chain is half as long. */
+static const double ROUND = 6755399441055744.0; /* 1.5 2^52 */
+static const double TWO52 = 4503599627370496.0;  /* 2^52 */
+
+static inline double power_log(double x, double n, double bias, double *r_out)
 {
-    const double round = 6755399441055744.0;        /* 1.5 2^52 */
-    const double two52 = 4503599627370496.0;         /* 2^52 */
     const double ln2_hi = 0x1.62e42feep-1, ln2_lo = 0x1.a39ef35793c76p-33;
     const double step_hi = 0x1.62e42feep-7, step_lo = 0x1.a39ef35793c76p-39; /* log(2)/64 */
     const double inv_step = 0x1.71547652b82fep6, y_limit = 800.0;           /* 64/log(2) */
@@ -35,32 +39,47 @@ static inline double power_parts(double x, double n, double bias)
     uint64_t i = mantissa >> 45;
     double m = from_bits(mantissa | 0x3ff0000000000000ULL);
     double c = from_bits((mantissa & 0x000fe00000000000ULL) | 0x3ff0100000000000ULL); /* 1 + (i + 1/2)/128 */
-    double e = from_bits((bits >> 52) | 0x4330000000000000ULL) - (two52 + bias);
+    double e = from_bits((bits >> 52) | 0x4330000000000000ULL) - (TWO52 + bias);
     double r = (m - c) * (1.0 / c);
     double log1p =
         r + r * r * (-0.5 + r * (0x1.5555555555555p-2 + r * (-0.25 + r * (0.2 + r * -0x1.5555555555555p-3))));
     double y = n * ((e * ln2_hi + log_c[i]) + (e * ln2_lo + log1p));
     y = y < -y_limit ? -y_limit : (y > y_limit ? y_limit : y);
-    double t = y * inv_step + round;
-    double k = t - round;
-    r = (y - k * step_hi) - k * step_lo;
+    double t = y * inv_step + ROUND;
+    double k = t - ROUND;
+    *r_out = (y - k * step_hi) - k * step_lo;
+    return t;
+}
+
+static inline double power_exp(double t, double r)
+{
+    double k = t - ROUND;
     uint64_t j = to_bits(t) & 63;
-    double q = (k - (from_bits(j | 0x4330000000000000ULL) - two52)) * 0.015625;
+    double q = (k - (from_bits(j | 0x4330000000000000ULL) - TWO52)) * 0.015625;
     double expm1 =
         r + r * r * (0.5 + r * (0x1.5555555555555p-3 + r * (0x1.5555555555555p-5 + r * 0x1.1111111111111p-7)));
     double s = exp2_table[j];
-    double q1 = (q * 0.5 - 0.25 + round) - round;
+    double q1 = (q * 0.5 - 0.25 + ROUND) - ROUND;
     /* 2^j as bits: j + 1023 sits in the low bits of (j + 1023) + 2^52, exactly */
-    double s1 = from_bits(to_bits(q1 + (two52 + 1023.0)) << 52);
-    double s2 = from_bits(to_bits((q - q1) + (two52 + 1023.0)) << 52);
+    double s1 = from_bits(to_bits(q1 + (TWO52 + 1023.0)) << 52);
+    double s2 = from_bits(to_bits((q - q1) + (TWO52 + 1023.0)) << 52);
     return ((s * expm1 + s) * s1) * s2;
 }
+
+/* x^n for a positive normal x, whose exponent field less `bias` is e in x = m 2^e, m in [1, 2) */
+static inline double power_parts(double x, double n, double bias)
+{
+    double r, t = power_log(x, n, bias, &r);
+    return power_exp(t, r);
+}
+
+#define FINITE_MAX 0x1.fffffffffffffp1023
 
 /* joint_power.power_float where x is a positive normal float, inf or NaN (the RK4's floored |w|):
  * the same bits, without the passes for zero and subnormals */
 static inline double joint_power_normal(double x, double n)
 {
-    int finite = x <= 0x1.fffffffffffffp1023;
+    int finite = x <= FINITE_MAX;
     double out = power_parts(finite ? x : 1.0, n, 1023.0);
     return finite ? out : x;
 }
@@ -80,12 +99,23 @@ typedef struct {
     double inv_j, b_j, k_el_j, k_hys_j, beta, gamma, n, floor;
 } Joint;
 
+/* the power's base in the Bouc-Wen rate: max(|w|, floor) */
+static inline double rate_base(double w, const Joint *p)
+{
+    double aw = fabs(w);
+    return p->floor > aw ? p->floor : aw;
+}
+
+/* v (1 - (gamma sign(v w) + beta) power), power = rate_base(w)^n */
+static inline double rate_of_power(double v, double w, double power, const Joint *p)
+{
+    return v * (1.0 - (copysign(p->gamma, v * w) + p->beta) * power);
+}
+
 /* v (1 - (gamma sign(v w) + beta) max(|w|, floor)^n), as rk4_floats spells it */
 static inline double bouc_wen_rate(double v, double w, const Joint *p)
 {
-    double aw = fabs(w);
-    double power = joint_power_normal(p->floor > aw ? p->floor : aw, p->n);
-    return v * (1.0 - (copysign(p->gamma, v * w) + p->beta) * power);
+    return rate_of_power(v, w, joint_power_normal(rate_base(w, p), p->n), p);
 }
 
 /* one RK4 step of length h of one linear nozzle (w moves as x does); accel0 = tau / J */
@@ -147,18 +177,27 @@ static inline __attribute__((always_inline)) void rk4_lanes(double *restrict x, 
                     : (Joint){cols[1][i], cols[2][i], cols[3][i], cols[4][i], cols[5][i], cols[6][i], cols[7][i], \
                               cols[8][i]})
     if (hys) {
-        /* rk4_step_hysteretic's operations, one loop per RK4 stage (one power each) with the
+        /* rk4_step_hysteretic's operations, loops per RK4 stage (one power each) with the
          * stage values kept in L1 between loops: a fused loop of four powers spills registers */
-        double acc[4][BLOCK], rate[4][BLOCK], vel[4][BLOCK], xs[BLOCK], ws[BLOCK];
+        double acc[4][BLOCK], rate[4][BLOCK], vel[4][BLOCK], xs[BLOCK], ws[BLOCK], t[BLOCK], r[BLOCK];
         const double half = 0.5 * h, sixth = h / 6.0;
         for (long s = 0; s < steps; s++) {
             for (int k = 0; k < 4; k++) {
                 const double *xk = k ? xs : x, *vk = k ? vel[k] : v, *wk = k ? ws : w;
+                /* bouc_wen_rate in two passes, one half of the power's dependency chain each
+                 * (power_log, power_exp): out-of-order execution overlaps more lanes of a
+                 * shorter chain */
                 for (Py_ssize_t i = 0; i < len; i++) {
                     const Joint p = JOINT_AT(i);
-                    double xi = xk[i], vi = vk[i], wi = wk[i];
+                    double xi = xk[i], vi = vk[i], wi = wk[i], base = rate_base(wi, &p), ri;
                     acc[k][i] = accel0[i] - p.b_j * vi - p.k_el_j * xi - p.k_hys_j * wi;
-                    rate[k][i] = bouc_wen_rate(vi, wi, &p);
+                    t[i] = power_log(base <= FINITE_MAX ? base : 1.0, p.n, 1023.0, &ri);
+                    r[i] = ri;
+                }
+                for (Py_ssize_t i = 0; i < len; i++) {
+                    const Joint p = JOINT_AT(i);
+                    double vi = vk[i], wi = wk[i], base = rate_base(wi, &p), power = power_exp(t[i], r[i]);
+                    rate[k][i] = rate_of_power(vi, wi, base <= FINITE_MAX ? power : base, &p);
                 }
                 if (k == 0)
                     memcpy(vel[0], v, (size_t)len * sizeof(double));
