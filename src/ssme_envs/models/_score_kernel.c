@@ -13,6 +13,7 @@
 #include <string.h>
 
 #include "_buffers.h"
+#include "_clones.h"
 
 /* the float64 config of nozzle_compiled.score_config, in its order */
 enum {
@@ -32,6 +33,94 @@ enum {
     RATE_MEASURED,
     CONFIG_SIZE
 };
+
+typedef struct {
+    double std, bias, dt, lim, ew, rw, envelope, cost, deg, rate_scale;
+    long long horizon, bias_step;
+    int has_bias;
+} Score;
+
+/* The loop of score_batch over envs, with no branch in it: each env's float-step operations,
+ * and for a restarting env (has_restarts and restarting[k]) initial_observation's, which are
+ * the same measurement at x = 0 and step 0, its other outputs selected to 0 and its state kept.
+ * (The arrays are restrict parameters: read from a struct, GCC does not vectorize the loop.) */
+#define SCORE_PARAMS                                                                                                 \
+    const Score *c, const double *restrict x, const double *restrict a, const long long *restrict t,                \
+        const double *restrict ref, const double *restrict noise, const double *restrict extra,                     \
+        double *restrict prev, double *restrict integral, double *restrict rate, float *restrict row_m,             \
+        float *restrict row_rate, float *restrict row_ref, float *restrict row_e, float *restrict row_int,          \
+        float *restrict row_extra, float *restrict row_a, double *restrict reward, char *restrict terminated,       \
+        const char *restrict restarting, Py_ssize_t n
+#define SCORE_ARGS                                                                                                   \
+    c, x, a, t, ref, noise, extra, prev, integral, rate, row_m, row_rate, row_ref, row_e, row_int, row_extra, row_a, \
+        reward, terminated, restarting, n
+
+static inline __attribute__((always_inline)) void score_lanes(SCORE_PARAMS, const int measured, const int has_extra,
+                                                              const int has_restarts)
+{
+    const double std = c->std, bias = c->bias, dt = c->dt, lim = c->lim, low = -lim, ew = c->ew, rw = c->rw;
+    const double envelope = c->envelope, cost = c->cost, deg = c->deg, rate_scale = c->rate_scale;
+    const long long horizon = c->horizon, bias_step = c->bias_step;
+    const int has_bias = c->has_bias;
+    for (Py_ssize_t k = 0; k < n; k++) {
+        const int fresh = has_restarts ? restarting[k] != 0 : 0;
+        const double xk = x[k];
+        const long long tk = t[k];
+        double m = (fresh ? 0.0 : xk) + noise[k] * std;
+        const double biased = m + bias;
+        m = has_bias && (fresh ? 0 : tk) >= bias_step ? biased : m;
+        const double e = (ref[k] - m) * deg;
+        double i = integral[k] + e * dt;
+        i = low > i ? low : i; /* numpy's clip: NaN kept */
+        i = lim < i ? lim : i;
+        const double d = a[k] - prev[k];
+        double r = ew * (e * e) - rw * (d * d);
+        const int ended = fabs(xk) > envelope;
+        const double penalty = r - cost * (double)(horizon - tk + 1);
+        r = ended ? penalty : r;
+        const double rk = rate[k], ik = integral[k], pk = prev[k], ak = a[k];
+        const double rate_value = measured ? (m - rk) * rate_scale : rk * rate_scale;
+        if (measured)
+            rate[k] = fresh ? rk : m;
+        integral[k] = fresh ? ik : i;
+        prev[k] = fresh ? pk : ak;
+        reward[k] = fresh ? 0.0 : r;
+        terminated[k] = (char)(fresh ? 0 : ended);
+        row_m[k] = (float)(m * deg);
+        row_rate[k] = fresh ? 0.0f : (float)rate_value;
+        row_ref[k] = (float)(ref[k] * deg);
+        row_e[k] = (float)e;
+        row_int[k] = fresh ? 0.0f : (float)i;
+        if (has_extra)
+            row_extra[k] = fresh ? 0.0f : (float)(extra[k] * deg);
+        row_a[k] = fresh ? 0.0f : (float)ak;
+    }
+}
+
+/* the nozzle's form: the rate measured, no extra column (restarting NULL or not: each
+ * compiled on its own) */
+static void CLONES score_measured(SCORE_PARAMS)
+{
+    if (restarting != NULL)
+        score_lanes(SCORE_ARGS, 1, 0, 1);
+    else
+        score_lanes(SCORE_ARGS, 1, 0, 0);
+}
+
+/* the launcher's form: the rate given, the nozzle's deflection an extra column */
+static void CLONES score_given(SCORE_PARAMS)
+{
+    if (restarting != NULL)
+        score_lanes(SCORE_ARGS, 0, 1, 1);
+    else
+        score_lanes(SCORE_ARGS, 0, 1, 0);
+}
+
+/* any other config */
+static void score_any(SCORE_PARAMS, int measured, int has_extra)
+{
+    score_lanes(SCORE_ARGS, measured, has_extra, restarting != NULL);
+}
 
 /* score_batch(x, a, prev, t, ref, noise, integral, rate, extra, values, reward, terminated, config
  *             [, restarting])
@@ -75,61 +164,25 @@ static PyObject *score_batch(PyObject *self, PyObject *const *args, Py_ssize_t n
     const char *restarting = has_restarts ? take(&v, args[13], 1, "?", N, 0, "restarting", NULL) : NULL;
     if (config == NULL || (has_restarts && restarting == NULL))
         goto done;
-    const double std = config[NOISE_STD], bias = config[BIAS], dt = config[DT], lim = config[LIMIT];
-    const double low = -lim, ew = -config[ERROR_WEIGHT], rw = config[RATE_WEIGHT];
-    const double envelope = config[ENVELOPE], cost = config[COST_BOUND], deg = config[DEGREES];
-    const double rate_scale = config[RATE_SCALE];
-    const long long horizon = (long long)config[HORIZON], bias_step = (long long)config[BIAS_STEP];
-    const int has_bias = config[HAS_BIAS] != 0.0, measured = config[RATE_MEASURED] != 0.0;
+    const Score config_ = {
+        .std = config[NOISE_STD], .bias = config[BIAS], .dt = config[DT], .lim = config[LIMIT],
+        .ew = -config[ERROR_WEIGHT], .rw = config[RATE_WEIGHT], .envelope = config[ENVELOPE],
+        .cost = config[COST_BOUND], .deg = config[DEGREES], .rate_scale = config[RATE_SCALE],
+        .horizon = (long long)config[HORIZON], .bias_step = (long long)config[BIAS_STEP],
+        .has_bias = config[HAS_BIAS] != 0.0,
+    };
+    const int measured = config[RATE_MEASURED] != 0.0;
+    const Py_ssize_t n = N;
     float *row_m = values, *row_rate = values + N, *row_ref = values + 2 * N, *row_e = values + 3 * N;
     float *row_int = values + 4 * N, *row_extra = values + 5 * N, *row_a = values + (rows - 1) * N;
-    for (Py_ssize_t k = 0; k < N; k++) {
-        if (restarting != NULL && restarting[k]) { /* initial_observation's operations */
-            double m = 0.0 + noise[k] * std;
-            if (has_bias && 0 >= bias_step)
-                m = m + bias;
-            row_m[k] = (float)(m * deg);
-            row_ref[k] = (float)(ref[k] * deg);
-            row_e[k] = (float)((ref[k] - m) * deg);
-            row_rate[k] = row_int[k] = row_a[k] = 0.0f;
-            if (has_extra)
-                row_extra[k] = 0.0f;
-            reward[k] = 0.0;
-            terminated[k] = 0;
-            continue;
-        }
-        double m = x[k] + noise[k] * std;
-        if (has_bias && t[k] >= bias_step)
-            m = m + bias;
-        const double e = (ref[k] - m) * deg;
-        double i = integral[k] + e * dt;
-        i = low > i ? low : i; /* numpy's clip: NaN kept */
-        i = lim < i ? lim : i;
-        const double d = a[k] - prev[k];
-        double r = ew * (e * e) - rw * (d * d);
-        const int ended = fabs(x[k]) > envelope;
-        if (ended)
-            r = r - cost * (double)(horizon - t[k] + 1);
-        double rate_value;
-        if (measured) {
-            rate_value = (m - rate[k]) * rate_scale;
-            rate[k] = m;
-        } else {
-            rate_value = rate[k] * rate_scale;
-        }
-        integral[k] = i;
-        prev[k] = a[k];
-        reward[k] = r;
-        terminated[k] = (char)ended;
-        row_m[k] = (float)(m * deg);
-        row_rate[k] = (float)rate_value;
-        row_ref[k] = (float)(ref[k] * deg);
-        row_e[k] = (float)e;
-        row_int[k] = (float)i;
-        if (has_extra)
-            row_extra[k] = (float)(extra[k] * deg);
-        row_a[k] = (float)a[k];
-    }
+    const Score *c = &config_;
+    /* each form compiled on its own, so that the loop over envs has no branch left to vectorize */
+    if (measured && !has_extra)
+        score_measured(SCORE_ARGS);
+    else if (!measured && has_extra)
+        score_given(SCORE_ARGS);
+    else
+        score_any(SCORE_ARGS, measured, has_extra);
     result = Py_NewRef(Py_None);
 done:
     release(&v);
