@@ -5,11 +5,7 @@
 #ifndef SSME_ENVS_JOINT_ARITHMETIC_H
 #define SSME_ENVS_JOINT_ARITHMETIC_H
 
-#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__linux__)
-#define CLONES __attribute__((target_clones("avx512f", "avx2", "default")))
-#else
-#define CLONES
-#endif
+#include "_clones.h"
 
 #define BLOCK 128
 
@@ -160,7 +156,8 @@ static inline void rk4_step_hysteretic(double *px, double *pv, double *pw, doubl
 
 /* `steps` RK4 steps of `len` (<= BLOCK) nozzles: state rows x, v, w; per-nozzle values in
  * rows of `cols` (tau and the joint's eight parameters), or the joint `shared` by every nozzle
- * (NULL: none), held in registers instead of eight loads a lane and stage; steps outermost and
+ * (NULL: none; else only tau is read from cols), held in registers instead of eight loads a
+ * lane and stage; steps outermost and
  * one loop per joint kind, so that the loop over nozzles is the one the compiler vectorizes.
  * Inlined into rk4_block with `shared` NULL or not, so that each form is compiled on its own. */
 static inline __attribute__((always_inline)) void rk4_lanes(double *restrict x, double *restrict v,
@@ -171,7 +168,7 @@ static inline __attribute__((always_inline)) void rk4_lanes(double *restrict x, 
     double accel0[BLOCK];
     const Joint one = shared != NULL ? *shared : (Joint){0};
     for (Py_ssize_t i = 0; i < len; i++)
-        accel0[i] = cols[0][i] * cols[1][i];
+        accel0[i] = cols[0][i] * (shared != NULL ? one.inv_j : cols[1][i]);
 #define JOINT_AT(i)                                                                                                 \
     (shared != NULL ? one                                                                                       \
                     : (Joint){cols[1][i], cols[2][i], cols[3][i], cols[4][i], cols[5][i], cols[6][i], cols[7][i], \

@@ -193,7 +193,7 @@ static PyObject *rk4_batch(PyObject *self, PyObject *const *args, Py_ssize_t nar
         const Joint *shared = shared_joint(cols + 1, &one);
         for (Py_ssize_t start = 0; start < n; start += BLOCK) {
             Py_ssize_t len = n - start < BLOCK ? n - start : BLOCK;
-            for (int c = 0; c < 9; c++)
+            for (int c = 0; c < (shared != NULL ? 1 : 9); c++) /* a shared joint is read from `one` */
                 column_fill(&cols[c], block[c], start, len);
             rk4_block(rows + start, rows + n + start, rows + 2 * n + start, block, len, h, steps, hys, shared);
         }
@@ -325,7 +325,7 @@ static PyObject *servo_batch(PyObject *self, PyObject *const *args, Py_ssize_t n
             column_fill(&cols[0], drive, start, len);
             if (has_gain)
                 column_fill(&cols[1], gain, start, len);
-            for (int c = 0; c < 8; c++)
+            for (int c = 0; c < (shared != NULL ? 0 : 8); c++)
                 column_fill(&cols[2 + c], block[1 + c], start, len);
             servo_block(x + start, x + n + start, x + 2 * n + start, theta + start, q + start, drive,
                         has_gain ? gain : NULL, sb, sb + 3, block, len, h, steps, samples, hys, shared);
