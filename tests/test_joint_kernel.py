@@ -136,6 +136,44 @@ def test_kernel_rk4_batch_has_the_reference_bits(plants, steps, shared) -> None:
             assert np.array_equal(np.array(alone).T, kernel)
 
 
+@compiled
+@settings(max_examples=40, deadline=None)
+@given(
+    plants=st.lists(
+        st.tuples(nozzles, joint_states, st.floats(-3e4, 3e4), st.booleans()), min_size=1, max_size=400
+    ),
+    shared=st.booleans(),
+)
+def test_skipped_nozzles_leave_the_others_bits_alone(plants, shared) -> None:
+    """Nozzles named in skip (a vector env's restarting envs, whose state it discards) are left
+    out of blocks where the kernel packs the others: every other nozzle gets the reference's
+    bits, and each skipped one is either stepped or left exactly as it was."""
+    norms = [nozzle.normalized() for nozzle, *_ in plants]
+    if shared:
+        p = rk4_parameters(norms[0])
+    else:
+        p = rk4_parameters({key: np.array([norm[key] for norm in norms]) for key in norms[0]})
+    state = np.array([s for _, s, _, _ in plants]).T.copy()
+    tau = np.array([t for _, _, t, _ in plants])
+    skip = np.array([k for *_, k in plants])
+    for params in (p, p._replace(hysteretic=False)):
+        kernel, reference = state.copy(), state.copy()
+        nozzle_joint._KERNEL.rk4_batch(kernel, tau, 0.002, 2, params, skip)
+        nozzle_joint._rk4_arrays_py(reference, tau, 0.002, 2, params)
+        assert np.array_equal(kernel[:, ~skip], reference[:, ~skip], equal_nan=True)
+        stepped = (kernel == reference) | (np.isnan(kernel) & np.isnan(reference))
+        kept = (kernel == state) | (np.isnan(kernel) & np.isnan(state))
+        assert (stepped.all(axis=0) | kept.all(axis=0))[skip].all()
+
+
+@compiled
+def test_a_skip_row_of_the_wrong_kind_is_named() -> None:
+    state, p = np.zeros((3, 4)), rk4_parameters(nozzle_joint.strong_nozzle().normalized())
+    for bad in (np.zeros(4), np.zeros(3, dtype=bool), [True] * 4):
+        with pytest.raises(TypeError, match="skip"):
+            nozzle_joint._KERNEL.rk4_batch(state, 0.0, 0.002, 1, p, bad)
+
+
 def test_rk4_arrays_takes_a_strided_state_through_the_reference_with_the_same_bits() -> None:
     p = rk4_parameters(
         NozzleParameters(J=20.0, b=250.0, k=1.6e5, a=0.15, beta=120.0, gamma=80.0, n=1.5).normalized()

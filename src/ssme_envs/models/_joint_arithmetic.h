@@ -8,6 +8,7 @@
 #include "_clones.h"
 
 #define BLOCK 128
+#define STRIDE (BLOCK + 8) /* a block's column rows: room for a whole vector stored past its lanes */
 
 static inline double from_bits(uint64_t u) { double d; memcpy(&d, &u, sizeof d); return d; }
 static inline uint64_t to_bits(double d) { uint64_t u; memcpy(&u, &d, sizeof u); return u; }
@@ -161,7 +162,7 @@ static inline void rk4_step_hysteretic(double *px, double *pv, double *pw, doubl
  * one loop per joint kind, so that the loop over nozzles is the one the compiler vectorizes.
  * Inlined into rk4_block with `shared` NULL or not, so that each form is compiled on its own. */
 static inline __attribute__((always_inline)) void rk4_lanes(double *restrict x, double *restrict v,
-                                                            double *restrict w, double (*restrict cols)[BLOCK],
+                                                            double *restrict w, double (*restrict cols)[STRIDE],
                                                             Py_ssize_t len, double h, long steps, int hys,
                                                             const Joint *shared)
 {
@@ -224,7 +225,7 @@ static inline __attribute__((always_inline)) void rk4_lanes(double *restrict x, 
 }
 
 static void CLONES rk4_block(double *restrict x, double *restrict v, double *restrict w,
-                             double (*restrict cols)[BLOCK], Py_ssize_t len, double h, long steps, int hys,
+                             double (*restrict cols)[STRIDE], Py_ssize_t len, double h, long steps, int hys,
                              const Joint *shared)
 {
     if (shared != NULL)
@@ -241,7 +242,7 @@ static void CLONES rk4_block(double *restrict x, double *restrict v, double *res
 static void CLONES servo_block(double *restrict x, double *restrict v, double *restrict w, double *restrict theta,
                                double *restrict q, const double *restrict drive, const double *restrict gain,
                                const double *restrict servo, const double *restrict body,
-                               double (*restrict cols)[BLOCK], Py_ssize_t len, double h, long steps,
+                               double (*restrict cols)[STRIDE], Py_ssize_t len, double h, long steps,
                                long samples, int hys, const Joint *shared)
 {
     double theta_next[BLOCK], q_next[BLOCK];

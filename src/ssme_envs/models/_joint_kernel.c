@@ -67,6 +67,60 @@ static void column_fill(const Column *col, double *dst, Py_ssize_t start, Py_ssi
             dst[i] = col->value;
 }
 
+/* Lanes a caller discards (a vector env's restarting envs), left out of a block's RK4: the others
+ * are packed into whole vectors (AVX-512's compress), stepped, and put back (expand). Each lane's
+ * operations are its own, so the bits of the others are the same. Elsewhere every lane is
+ * stepped. */
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__linux__)
+#include <immintrin.h>
+#define PACKS 1
+enum { MAX_PACKED = 12 }; /* rows packed: a nozzle's three, tau and a per-nozzle joint's eight */
+
+/* the lanes of [i, i + 8) that skip does not name (and that lie below len), as a mask */
+static inline unsigned kept_mask(const char *skip, Py_ssize_t i, Py_ssize_t len)
+{
+    unsigned keep = 0;
+    for (Py_ssize_t b = 0; b < 8 && i + b < len; b++)
+        keep |= (unsigned)(skip[i + b] == 0) << b;
+    return keep;
+}
+
+/* The kept lanes of the `count` rows src[r][0, len) packed into dst[r] (STRIDE wide), padded to
+ * whole vectors with the last of them; the padded count (0 where none is kept). */
+__attribute__((target("avx512f"))) static Py_ssize_t pack_lanes(const char *skip, double *const *src,
+                                                                  double (*dst)[STRIDE], int count,
+                                                                  Py_ssize_t len)
+{
+    Py_ssize_t m = 0;
+    for (Py_ssize_t i = 0; i < len; i += 8) {
+        const __mmask8 keep = (__mmask8)kept_mask(skip, i, len);
+        for (int r = 0; r < count; r++)
+            _mm512_storeu_pd(dst[r] + m, _mm512_maskz_compress_pd(keep, _mm512_loadu_pd(src[r] + i)));
+        m += __builtin_popcount(keep);
+    }
+    Py_ssize_t padded = (m + 7) / 8 * 8;
+    for (int r = 0; m > 0 && r < count; r++)
+        for (Py_ssize_t j = m; j < padded; j++)
+            dst[r][j] = dst[r][m - 1];
+    return padded;
+}
+
+/* pack_lanes undone for the `count` rows: the packed lanes back into their places in dst */
+__attribute__((target("avx512f"))) static void unpack_lanes(const char *skip, double (*src)[STRIDE],
+                                                             double *const *dst, int count, Py_ssize_t len)
+{
+    Py_ssize_t m = 0;
+    for (Py_ssize_t i = 0; i < len; i += 8) {
+        const __mmask8 keep = (__mmask8)kept_mask(skip, i, len);
+        for (int r = 0; r < count; r++)
+            _mm512_mask_storeu_pd(dst[r] + i, keep, _mm512_maskz_expandloadu_pd(keep, src[r] + m));
+        m += __builtin_popcount(keep);
+    }
+}
+#else
+#define PACKS 0
+#endif
+
 /* the joint of eight numbers (inv_j ... w_floor) where none of its columns is a vector: into *one,
  * returned; NULL where any is */
 static const Joint *shared_joint(const Column *joint, Joint *one)
@@ -165,21 +219,49 @@ static PyObject *rk4_float(PyObject *self, PyObject *const *args, Py_ssize_t nar
     return Py_BuildValue("(ddd)", x, v, w);
 }
 
-/* rk4_batch(state, tau, h, steps, p): state a C-contiguous float64 (3, N) array, in place */
+/* A C-contiguous bool vector of length n, or None (NULL) */
+static int open_mask(PyObject *obj, Py_ssize_t n, Py_buffer *view, const char **mask, const char *name)
+{
+    *mask = NULL;
+    if (obj == Py_None)
+        return 0;
+    if (PyObject_GetBuffer(obj, view, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0) {
+        PyErr_Clear();
+        PyErr_Format(PyExc_TypeError, "%s: None or a contiguous bool vector", name);
+        return -1;
+    }
+    if (view->ndim != 1 || view->shape[0] != n || strcmp(view->format, "?") != 0) {
+        PyBuffer_Release(view);
+        PyErr_Format(PyExc_TypeError, "%s: None or a bool vector of length %zd", name, n);
+        return -1;
+    }
+    *mask = (const char *)view->buf;
+    return 0;
+}
+
+/* rk4_batch(state, tau, h, steps, p[, skip]): state a C-contiguous float64 (3, N) array, in
+ * place; skip None or a bool (N,) row of nozzles whose state the caller discards, which a block
+ * may leave as they were (where AVX-512 packs the others) */
 static PyObject *rk4_batch(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
     PyObject *items[8];
     int hys, err = 0;
-    if (check_call(nargs, 5, "rk4_batch(state, tau, h, steps, p)") < 0 || read_joint(args[4], items, &hys) < 0)
+    if (check_call(nargs == 5 ? 6 : nargs, 6, "rk4_batch(state, tau, h, steps, p[, skip])") < 0 ||
+        read_joint(args[4], items, &hys) < 0)
         return NULL;
     double h = number(args[2], &err);
     long steps = PyLong_AsLong(args[3]);
     if (err || (steps == -1 && PyErr_Occurred()))
         return NULL;
-    Py_buffer state;
+    Py_buffer state, skip_view;
     if (open_state(args[0], &state) < 0)
         return NULL;
     Py_ssize_t n = state.shape[1];
+    const char *skip;
+    if (open_mask(nargs == 6 ? args[5] : Py_None, n, &skip_view, &skip, "skip") < 0) {
+        PyBuffer_Release(&state);
+        return NULL;
+    }
     Column cols[9];
     int opened = 0;
     static const char *names[9] = {"tau", "inv_j", "b_j", "k_el_j", "k_hys_j", "beta", "gamma", "n", "w_floor"};
@@ -188,19 +270,42 @@ static PyObject *rk4_batch(PyObject *self, PyObject *const *args, Py_ssize_t nar
             break;
     if (opened == 9) {
         double *rows = (double *)state.buf;
-        double block[9][BLOCK];
+        double block[9][STRIDE];
         Joint one;
         const Joint *shared = shared_joint(cols + 1, &one);
+        const int filled = shared != NULL ? 1 : 9; /* a shared joint is read from `one` */
+#if PACKS
+        const int packs = skip != NULL && __builtin_cpu_supports("avx512f");
+        double packed[3 + 9][STRIDE];
+#endif
         for (Py_ssize_t start = 0; start < n; start += BLOCK) {
             Py_ssize_t len = n - start < BLOCK ? n - start : BLOCK;
-            for (int c = 0; c < (shared != NULL ? 1 : 9); c++) /* a shared joint is read from `one` */
+            for (int c = 0; c < filled; c++)
                 column_fill(&cols[c], block[c], start, len);
-            rk4_block(rows + start, rows + n + start, rows + 2 * n + start, block, len, h, steps, hys, shared);
+            double *at[3 + 9] = {rows + start, rows + n + start, rows + 2 * n + start};
+#if PACKS
+            if (packs) {
+                for (int c = 0; c < filled; c++)
+                    at[3 + c] = block[c];
+                Py_ssize_t m = pack_lanes(skip + start, at, packed, 3 + filled, len);
+                if (m < len) { /* a whole vector or more left out */
+                    if (m > 0) {
+                        rk4_block(packed[0], packed[1], packed[2], packed + 3, m, h, steps, hys,
+                                  shared);
+                        unpack_lanes(skip + start, packed, at, 3, len);
+                    }
+                    continue;
+                }
+            }
+#endif
+            rk4_block(at[0], at[1], at[2], block, len, h, steps, hys, shared);
         }
     }
     for (int c = 0; c < opened; c++)
         if (cols[c].is_view)
             PyBuffer_Release(&cols[c].view);
+    if (skip != NULL)
+        PyBuffer_Release(&skip_view);
     PyBuffer_Release(&state);
     if (opened != 9)
         return NULL;
@@ -317,7 +422,7 @@ static PyObject *servo_batch(PyObject *self, PyObject *const *args, Py_ssize_t n
     }
     if (ok) {
         double *x = (double *)state.buf, *theta = (double *)rows[0].buf, *q = (double *)rows[1].buf;
-        double block[9][BLOCK], drive[BLOCK], gain[BLOCK];
+        double block[9][STRIDE], drive[BLOCK], gain[BLOCK];
         Joint one;
         const Joint *shared = shared_joint(cols + 2, &one);
         for (Py_ssize_t start = 0; start < n; start += BLOCK) {

@@ -238,10 +238,12 @@ def _rk4_floats_py(
 
 
 def _rk4_arrays_py(
-    state: np.ndarray, tau: np.ndarray | float, h: float, steps: int, p: RK4Parameters
-) -> None:
+    state: np.ndarray, tau: np.ndarray | float, h: float, steps: int, p: RK4Parameters,
+    skip: np.ndarray | None = None,
+) -> None:  # fmt: skip
     """``steps`` RK4 steps of N nozzles in place: ``state`` (3, N) rows x (rad), v (rad/s), w
-    (rad), torques tau (N,) in N m held over the steps; the arithmetic of :func:`_rk4_floats_py`."""
+    (rad), torques tau (N,) in N m held over the steps; the arithmetic of :func:`_rk4_floats_py`.
+    ``skip`` (the nozzles a caller discards, see :func:`rk4_arrays`) is taken and all are stepped."""
     n = state.shape[1]
     rates = np.empty((4, 3, n))  # the four RK4 stages' derivatives of (x, v, w)
     stage = np.empty((3, n))
@@ -292,7 +294,7 @@ def _rk4_arrays_py(
 
 def _kernel_agrees(kernel: Any) -> bool:
     """Whether the kernel gives the references' bits on a check set (both joints, both carriers,
-    NaN and inf included), its tables set first."""
+    NaN and inf included, and a batch that leaves nozzles out), its tables set first."""
     kernel.set_tables(*tables())
     states = np.array(
         [[0.01, -0.03, 0.0, 0.05, np.nan], [0.5, -2.0, 0.0, -3.0, 0.0], [0.02, 0.01, 0.0, -0.02, 0.0]]
@@ -315,6 +317,14 @@ def _kernel_agrees(kernel: Any) -> bool:
             columns = zip(states.T.tolist(), tau.tolist(), strict=True)
             floats = [kernel.rk4_float(*col, t, 0.002, 3, p) for col, t in columns]
             agrees &= np.array_equal(np.array(floats).T, expected, equal_nan=True)
+    # nozzles a caller discards (skip) left out: the others keep their bits where the kernel packs them
+    wide, taus, skip = np.tile(states, 8), np.tile(tau, 8), np.arange(40) % 3 == 0
+    tiled = RK4Parameters(*(np.tile(v, 8) if isinstance(v, np.ndarray) else v for v in per_nozzle))
+    for p in (strong, tiled):
+        batch, expected = wide.copy(), wide.copy()
+        kernel.rk4_batch(batch, taus, 0.002, 3, p, skip)
+        _rk4_arrays_py(expected, taus, 0.002, 3, p)
+        agrees &= np.array_equal(batch[:, ~skip], expected[:, ~skip], equal_nan=True)
     return bool(agrees) and all(hasattr(kernel, name) for name in ("servo_float", "servo_batch"))
 
 
@@ -332,12 +342,18 @@ rk4_floats: Callable[..., tuple[float, float, float]] = (
 )
 
 
-def rk4_arrays(state: np.ndarray, tau: np.ndarray | float, h: float, steps: int, p: RK4Parameters) -> None:
+def rk4_arrays(
+    state: np.ndarray, tau: np.ndarray | float, h: float, steps: int, p: RK4Parameters,
+    skip: np.ndarray | None = None,
+) -> None:  # fmt: skip
     """``steps`` RK4 steps of N nozzles in place: ``state`` (3, N) rows x (rad), v (rad/s), w
-    (rad), torques tau (N,) in N m held over the steps; the arithmetic of :func:`rk4_floats`."""
+    (rad), torques tau (N,) in N m held over the steps; the arithmetic of :func:`rk4_floats`.
+    ``skip``: None or a bool (N,) row of nozzles whose state the caller discards (a vector env's
+    restarting envs), which may be left as they were (the kernel leaves them out of its blocks
+    where AVX-512 packs the others; the reference steps them)."""
     if _KERNEL is not None:
         try:
-            _KERNEL.rk4_batch(state, tau, h, steps, p)
+            _KERNEL.rk4_batch(state, tau, h, steps, p, skip)
             return
         except TypeError:  # a layout it does not take (a strided view): the reference, the same bits
             pass
