@@ -158,8 +158,8 @@ static inline void rk4_step_hysteretic(double *px, double *pv, double *pw, doubl
 /* `steps` RK4 steps of `len` (<= BLOCK) nozzles: state rows x, v, w; per-nozzle values in
  * rows of `cols` (tau and the joint's eight parameters), or the joint `shared` by every nozzle
  * (NULL: none; else only tau is read from cols), held in registers instead of eight loads a
- * lane and stage; steps outermost and
- * one loop per joint kind, so that the loop over nozzles is the one the compiler vectorizes.
+ * lane and stage; steps outermost and one loop per joint kind, so that the loop over nozzles is
+ * the one the compiler vectorizes.
  * Inlined into rk4_block with `shared` NULL or not, so that each form is compiled on its own. */
 static inline __attribute__((always_inline)) void rk4_lanes(double *restrict x, double *restrict v,
                                                             double *restrict w, double (*restrict cols)[STRIDE],

@@ -76,7 +76,8 @@ static void column_fill(const Column *col, double *dst, Py_ssize_t start, Py_ssi
 #define PACKS 1
 enum { MAX_PACKED = 12 }; /* rows packed: a nozzle's three, tau and a per-nozzle joint's eight */
 
-/* the lanes of [i, i + 8) that skip does not name (and that lie below len), as a mask */
+/* the lanes of [i, i + 8) that skip does not name and that lie below len, as a mask (the loads
+ * and stores below touch no other lane: none past a row's end) */
 static inline unsigned kept_mask(const char *skip, Py_ssize_t i, Py_ssize_t len)
 {
     unsigned keep = 0;
@@ -95,7 +96,7 @@ __attribute__((target("avx512f"))) static Py_ssize_t pack_lanes(const char *skip
     for (Py_ssize_t i = 0; i < len; i += 8) {
         const __mmask8 keep = (__mmask8)kept_mask(skip, i, len);
         for (int r = 0; r < count; r++)
-            _mm512_storeu_pd(dst[r] + m, _mm512_maskz_compress_pd(keep, _mm512_loadu_pd(src[r] + i)));
+            _mm512_storeu_pd(dst[r] + m, _mm512_maskz_compress_pd(keep, _mm512_maskz_loadu_pd(keep, src[r] + i)));
         m += __builtin_popcount(keep);
     }
     Py_ssize_t padded = (m + 7) / 8 * 8;
