@@ -220,22 +220,32 @@ static PyObject *rk4_float(PyObject *self, PyObject *const *args, Py_ssize_t nar
     return Py_BuildValue("(ddd)", x, v, w);
 }
 
-/* A C-contiguous bool vector of length n, or None (NULL) */
+/* A C-contiguous vector of length n and format code `format` (a `kind` vector: "writable
+ * float64", "bool"), writable where asked */
+static int open_vector(PyObject *obj, Py_ssize_t n, Py_buffer *view, int writable, const char *format,
+                       const char *name, const char *kind)
+{
+    if (PyObject_GetBuffer(obj, view, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0)) < 0) {
+        PyErr_Clear();
+        PyErr_Format(PyExc_TypeError, "%s: a contiguous %s vector", name, kind);
+        return -1;
+    }
+    if (view->ndim != 1 || view->shape[0] != n || strcmp(view->format, format) != 0) {
+        PyBuffer_Release(view);
+        PyErr_Format(PyExc_TypeError, "%s: a %s vector of length %zd", name, kind, n);
+        return -1;
+    }
+    return 0;
+}
+
+/* skip: None (NULL) or a C-contiguous bool vector of length n */
 static int open_mask(PyObject *obj, Py_ssize_t n, Py_buffer *view, const char **mask, const char *name)
 {
     *mask = NULL;
     if (obj == Py_None)
         return 0;
-    if (PyObject_GetBuffer(obj, view, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0) {
-        PyErr_Clear();
-        PyErr_Format(PyExc_TypeError, "%s: None or a contiguous bool vector", name);
+    if (open_vector(obj, n, view, 0, "?", name, "bool") < 0)
         return -1;
-    }
-    if (view->ndim != 1 || view->shape[0] != n || strcmp(view->format, "?") != 0) {
-        PyBuffer_Release(view);
-        PyErr_Format(PyExc_TypeError, "%s: None or a bool vector of length %zd", name, n);
-        return -1;
-    }
     *mask = (const char *)view->buf;
     return 0;
 }
@@ -367,22 +377,6 @@ static PyObject *servo_float(PyObject *self, PyObject *const *args, Py_ssize_t n
     return Py_BuildValue("(ddddd)", x, v, w, theta, q);
 }
 
-/* A writable C-contiguous float64 vector of length n (theta, q), in place */
-static int open_row(PyObject *obj, Py_ssize_t n, Py_buffer *view, const char *name)
-{
-    if (PyObject_GetBuffer(obj, view, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | PyBUF_WRITABLE) < 0) {
-        PyErr_Clear();
-        PyErr_Format(PyExc_TypeError, "%s: a writable contiguous float64 vector", name);
-        return -1;
-    }
-    if (view->ndim != 1 || view->shape[0] != n || strcmp(view->format, "d") != 0) {
-        PyBuffer_Release(view);
-        PyErr_Format(PyExc_TypeError, "%s: a writable float64 vector of length %zd", name, n);
-        return -1;
-    }
-    return 0;
-}
-
 /* servo_batch(state, theta, q, drive, gain, servo, lim, body, h, steps, samples, p): N launchers in
  * place, state (3, N), theta and q (N,); drive and gain (None: no fault) numbers or (N,) */
 static PyObject *servo_batch(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
@@ -405,9 +399,9 @@ static PyObject *servo_batch(PyObject *self, PyObject *const *args, Py_ssize_t n
     Column cols[10]; /* drive, gain, the joint's eight */
     static const char *names[8] = {"inv_j", "b_j", "k_el_j", "k_hys_j", "beta", "gamma", "n", "w_floor"};
     int has_gain = args[4] != Py_None;
-    if (open_row(args[1], n, &rows[0], "theta") == 0) {
+    if (open_vector(args[1], n, &rows[0], 1, "d", "theta", "writable float64") == 0) {
         rows_open = 1;
-        if (open_row(args[2], n, &rows[1], "q") == 0) {
+        if (open_vector(args[2], n, &rows[1], 1, "d", "q", "writable float64") == 0) {
             rows_open = 2;
             if (column_open(args[3], n, &cols[0], "drive") == 0) {
                 opened = 1;
