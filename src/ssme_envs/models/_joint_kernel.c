@@ -71,48 +71,53 @@ static void column_fill(const Column *col, double *dst, Py_ssize_t start, Py_ssi
  * are packed into whole vectors (AVX-512's compress), stepped, and put back (expand). Each lane's
  * operations are its own, so the bits of the others are the same. Elsewhere every lane is
  * stepped. */
+enum { MAX_PACKED = 3 + 9 }; /* rows packed: a nozzle's three, tau and a per-nozzle joint's eight */
+
 #if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__linux__)
 #include <immintrin.h>
 #define PACKS 1
-enum { MAX_PACKED = 12 }; /* rows packed: a nozzle's three, tau and a per-nozzle joint's eight */
-
-/* the lanes of [i, i + 8) that skip does not name and that lie below len, as a mask (the loads
- * and stores below touch no other lane: none past a row's end) */
-static inline unsigned kept_mask(const char *skip, Py_ssize_t i, Py_ssize_t len)
+/* The lanes of a block that skip does not name, one mask per vector of 8 lanes (lanes at or past
+ * len are not kept, so the loads and stores below touch none past a row's end); their count */
+static Py_ssize_t kept_masks(const char *skip, Py_ssize_t len, unsigned char *masks)
 {
-    unsigned keep = 0;
-    for (Py_ssize_t b = 0; b < 8 && i + b < len; b++)
-        keep |= (unsigned)(skip[i + b] == 0) << b;
-    return keep;
+    Py_ssize_t kept = 0;
+    for (Py_ssize_t i = 0; i < len; i += 8) {
+        unsigned keep = 0;
+        for (Py_ssize_t b = 0; b < 8 && i + b < len; b++)
+            keep |= (unsigned)(skip[i + b] == 0) << b;
+        masks[i / 8] = (unsigned char)keep;
+        kept += __builtin_popcount(keep);
+    }
+    return kept;
 }
 
 /* The kept lanes of the `count` rows src[r][0, len) packed into dst[r] (STRIDE wide), padded to
- * whole vectors with the last of them; the padded count (0 where none is kept). */
-__attribute__((target("avx512f"))) static Py_ssize_t pack_lanes(const char *skip, double *const *src,
+ * whole vectors with the last of them (at least one is kept); the padded count. */
+__attribute__((target("avx512f"))) static Py_ssize_t pack_lanes(const unsigned char *masks, double *const *src,
                                                                   double (*dst)[STRIDE], int count,
                                                                   Py_ssize_t len)
 {
     Py_ssize_t m = 0;
     for (Py_ssize_t i = 0; i < len; i += 8) {
-        const __mmask8 keep = (__mmask8)kept_mask(skip, i, len);
+        const __mmask8 keep = masks[i / 8];
         for (int r = 0; r < count; r++)
             _mm512_storeu_pd(dst[r] + m, _mm512_maskz_compress_pd(keep, _mm512_maskz_loadu_pd(keep, src[r] + i)));
         m += __builtin_popcount(keep);
     }
     Py_ssize_t padded = (m + 7) / 8 * 8;
-    for (int r = 0; m > 0 && r < count; r++)
+    for (int r = 0; r < count; r++)
         for (Py_ssize_t j = m; j < padded; j++)
             dst[r][j] = dst[r][m - 1];
     return padded;
 }
 
 /* pack_lanes undone for the `count` rows: the packed lanes back into their places in dst */
-__attribute__((target("avx512f"))) static void unpack_lanes(const char *skip, double (*src)[STRIDE],
+__attribute__((target("avx512f"))) static void unpack_lanes(const unsigned char *masks, double (*src)[STRIDE],
                                                              double *const *dst, int count, Py_ssize_t len)
 {
     Py_ssize_t m = 0;
     for (Py_ssize_t i = 0; i < len; i += 8) {
-        const __mmask8 keep = (__mmask8)kept_mask(skip, i, len);
+        const __mmask8 keep = masks[i / 8];
         for (int r = 0; r < count; r++)
             _mm512_mask_storeu_pd(dst[r] + i, keep, _mm512_maskz_expandloadu_pd(keep, src[r] + m));
         m += __builtin_popcount(keep);
@@ -287,26 +292,25 @@ static PyObject *rk4_batch(PyObject *self, PyObject *const *args, Py_ssize_t nar
         const int filled = shared != NULL ? 1 : 9; /* a shared joint is read from `one` */
 #if PACKS
         const int packs = skip != NULL && __builtin_cpu_supports("avx512f");
-        double packed[3 + 9][STRIDE];
+        double packed[MAX_PACKED][STRIDE];
+        unsigned char masks[BLOCK / 8];
 #endif
         for (Py_ssize_t start = 0; start < n; start += BLOCK) {
             Py_ssize_t len = n - start < BLOCK ? n - start : BLOCK;
             for (int c = 0; c < filled; c++)
                 column_fill(&cols[c], block[c], start, len);
-            double *at[3 + 9] = {rows + start, rows + n + start, rows + 2 * n + start};
+            double *at[MAX_PACKED] = {rows + start, rows + n + start, rows + 2 * n + start};
 #if PACKS
-            if (packs) {
+            Py_ssize_t kept = packs ? kept_masks(skip + start, len, masks) : len;
+            if ((kept + 7) / 8 * 8 < len) { /* a whole vector or more left out: the others packed */
                 for (int c = 0; c < filled; c++)
                     at[3 + c] = block[c];
-                Py_ssize_t m = pack_lanes(skip + start, at, packed, 3 + filled, len);
-                if (m < len) { /* a whole vector or more left out */
-                    if (m > 0) {
-                        rk4_block(packed[0], packed[1], packed[2], packed + 3, m, h, steps, hys,
-                                  shared);
-                        unpack_lanes(skip + start, packed, at, 3, len);
-                    }
-                    continue;
+                if (kept > 0) {
+                    Py_ssize_t m = pack_lanes(masks, at, packed, 3 + filled, len);
+                    rk4_block(packed[0], packed[1], packed[2], packed + 3, m, h, steps, hys, shared);
+                    unpack_lanes(masks, packed, at, 3, len);
                 }
+                continue;
             }
 #endif
             rk4_block(at[0], at[1], at[2], block, len, h, steps, hys, shared);
