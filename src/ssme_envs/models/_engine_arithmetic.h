@@ -71,7 +71,7 @@ static const double *rows_at(const Plant *p, long long t)
 /* the plant of envs [j0, j0 + b) under the commands c0, c1, the gains about g0, g1 (chunk
  * arrays), in place; scratch: n CHUNK doubles. Envs at one step share its rows and go stage by
  * stage; a chunk of envs at different steps (of a scheduled plant) goes env by env. */
-static void plant_chunk(const Plant *p, double *x, double *linkage, double *valve, Py_ssize_t N,
+static void CLONES plant_chunk(const Plant *p, double *x, double *linkage, double *valve, Py_ssize_t N,
                         Py_ssize_t j0, Py_ssize_t b, const long long *t, const double *c0,
                         const double *c1, const double *g0, const double *g1, double *scratch)
 {
@@ -149,7 +149,7 @@ static void plant_chunk(const Plant *p, double *x, double *linkage, double *valv
 
 /* the commands of envs [j0, j0 + b) (action * scale, the nominal valves added) and the gains'
  * centres (the nominal valves when scheduled, else 0) */
-static void commands(const Plant *p, const double *action, Py_ssize_t N, Py_ssize_t j0, Py_ssize_t b,
+static inline void commands(const Plant *p, const double *action, Py_ssize_t N, Py_ssize_t j0, Py_ssize_t b,
                      const long long *t, double scale, double *c0, double *c1, double *g0, double *g1)
 {
     for (Py_ssize_t k = 0; k < b; k++) {
@@ -169,7 +169,7 @@ static void commands(const Plant *p, const double *action, Py_ssize_t N, Py_ssiz
 }
 
 /* the measurements m = y + z s of a chunk's envs (z float32 unit noise) */
-static void measure(Py_ssize_t b, const double *restrict y0, const double *restrict y1, const float *restrict z0,
+static inline void measure(Py_ssize_t b, const double *restrict y0, const double *restrict y1, const float *restrict z0,
                     const float *restrict z1, double s0, double s1, double *restrict m0, double *restrict m1)
 {
     for (Py_ssize_t k = 0; k < b; k++) {
@@ -179,7 +179,7 @@ static void measure(Py_ssize_t b, const double *restrict y0, const double *restr
 }
 
 /* a chunk's references: its envs' own (each) or one for all */
-static void references(Py_ssize_t b, const double *restrict r, int each, double *restrict out)
+static inline void references(Py_ssize_t b, const double *restrict r, int each, double *restrict out)
 {
     if (each)
         memcpy(out, r, (size_t)b * sizeof(double));
@@ -188,27 +188,36 @@ static void references(Py_ssize_t b, const double *restrict r, int each, double 
             out[k] = r[0];
 }
 
-/* the observation values of a chunk's envs, rounded to float32 (as the envs hand them out):
- * measurements and references in %, errors, integrals, the action */
-static void observations(Py_ssize_t b, float *values, Py_ssize_t N, const double *restrict m0,
-                         const double *restrict m1, const double *restrict ref0, const double *restrict ref1,
-                         const double *restrict e0, const double *restrict e1, const double *restrict i0,
-                         const double *restrict i1, const double *restrict a0, const double *restrict a1)
+/* a chunk's row of observation values, rounded to float32: in % (100 in), or as it is */
+static inline void percent(Py_ssize_t b, float *restrict out, const double *restrict in)
 {
-    float *restrict o[10];
-    for (int q = 0; q < 10; q++)
-        o[q] = values + q * N;
-    for (Py_ssize_t k = 0; k < b; k++) {
-        o[0][k] = (float)(100.0 * m0[k]), o[1][k] = (float)(100.0 * m1[k]);
-        o[2][k] = (float)(100.0 * ref0[k]), o[3][k] = (float)(100.0 * ref1[k]);
-        o[4][k] = (float)e0[k], o[5][k] = (float)e1[k], o[6][k] = (float)i0[k], o[7][k] = (float)i1[k];
-        o[8][k] = (float)a0[k], o[9][k] = (float)a1[k];
-    }
+    for (Py_ssize_t k = 0; k < b; k++)
+        out[k] = (float)(100.0 * in[k]);
+}
+
+static inline void narrow(Py_ssize_t b, float *restrict out, const double *restrict in)
+{
+    for (Py_ssize_t k = 0; k < b; k++)
+        out[k] = (float)in[k];
+}
+
+/* the observation values of a chunk's envs, rounded to float32 (as the envs hand them out):
+ * measurements and references in %, errors, integrals, the action. A loop per row: the
+ * compiler vectorizes none of one loop over all ten. */
+static inline void observations(Py_ssize_t b, float *values, Py_ssize_t N, const double *m0, const double *m1,
+                                const double *ref0, const double *ref1, const double *e0, const double *e1,
+                                const double *i0, const double *i1, const double *a0, const double *a1)
+{
+    const double *rows[10] = {m0, m1, ref0, ref1, e0, e1, i0, i1, a0, a1};
+    for (int q = 0; q < 4; q++)
+        percent(b, values + q * N, rows[q]);
+    for (int q = 4; q < 10; q++)
+        narrow(b, values + q * N, rows[q]);
 }
 
 /* the errors e (in %), the integrals i (clipped as numpy's clip: min(max(x, lo), hi), NaN kept)
  * and the reward without the termination penalty, of a chunk's envs */
-static void errors(Py_ssize_t b, const double *restrict ref0, const double *restrict ref1,
+static inline void errors(Py_ssize_t b, const double *restrict ref0, const double *restrict ref1,
                    const double *restrict m0, const double *restrict m1, double *restrict i0,
                    double *restrict i1, const double *restrict a0, const double *restrict a1,
                    const double *restrict p0, const double *restrict p1, double *restrict e0,

@@ -13,6 +13,7 @@
 #include <string.h>
 
 #include "_buffers.h"
+#include "_clones.h"
 
 static double number(PyObject *obj, int *err)
 {
@@ -228,6 +229,75 @@ done:
     return result;
 }
 
+/* the arrays of a task_batch call, checked */
+typedef struct {
+    double *x, *linkage, *valve, *integral0, *integral1, *held;
+    const double *prev0, *prev1, *action;
+    const long long *t;
+    const double *r0, *r1;
+    const float *z0, *z1;
+    float *values;
+    double *reward;
+    char *terminated;
+    int each0, each1;
+    Py_ssize_t N;
+} Steps;
+
+/* task_batch's steps, CHUNK envs at a time; every loop but a scheduled plant's mixed chunk has
+ * no branch, so that the clones run them as vectors */
+static void CLONES task_chunks(const Plant *p, const Steps *a, const double *config, double *scratch)
+{
+    const Py_ssize_t N = a->N, n = p->n;
+    const long long *t = a->t;
+    const double *action = a->action;
+    double *x = a->x, *held = a->held, *integral0 = a->integral0, *integral1 = a->integral1;
+    const double s0 = config[S0], s1 = config[S1], dt = config[DT], lim = config[LIMIT];
+    const double ew = config[ERROR_WEIGHT], rw = config[RATE_WEIGHT], envelope = config[ENVELOPE];
+    const double magnitude = config[MAGNITUDE], cost = config[COST_BOUND];
+    const long long fault_step = (long long)config[FAULT_STEP], horizon = (long long)config[HORIZON];
+    const int kind = (int)config[FAULT_KIND], index = (int)config[FAULT_INDEX] != 0;
+    double c0[CHUNK], c1[CHUNK], g0[CHUNK], g1[CHUNK], ref0[CHUNK], ref1[CHUNK];
+    double m0[CHUNK], m1[CHUNK], e0[CHUNK], e1[CHUNK];
+    for (Py_ssize_t j0 = 0; j0 < N; j0 += CHUNK) {
+        const Py_ssize_t b = N - j0 < CHUNK ? N - j0 : CHUNK;
+        const long long *restrict tc = t + j0;
+        commands(p, action, N, j0, b, t, config[SCALE], c0, c1, g0, g1);
+        double *ci = index ? c1 : c0;
+        if (kind == STUCK_VALVE) {
+            for (Py_ssize_t k = 0; k < b; k++) {
+                double h = tc[k] == fault_step + 1 ? ci[k] : held[j0 + k];
+                ci[k] = tc[k] > fault_step ? h : ci[k];
+                held[j0 + k] = h;
+            }
+        } else if (kind == GAIN_LOSS) {
+            for (Py_ssize_t k = 0; k < b; k++)
+                ci[k] = tc[k] > fault_step ? ci[k] * magnitude : ci[k];
+        }
+        plant_chunk(p, x, a->linkage, a->valve, N, j0, b, t, c0, c1, g0, g1, scratch);
+        references(b, a->each0 ? a->r0 + j0 : a->r0, a->each0, ref0);
+        references(b, a->each1 ? a->r1 + j0 : a->r1, a->each1, ref1);
+        const double *restrict y0 = x + (n - 2) * N + j0, *restrict y1 = x + (n - 1) * N + j0;
+        measure(b, y0, y1, a->z0 + j0, a->z1 + j0, s0, s1, m0, m1);
+        if (kind == SENSOR_BIAS) {
+            double *mi = index ? m1 : m0;
+            for (Py_ssize_t k = 0; k < b; k++)
+                mi[k] = tc[k] >= fault_step ? mi[k] + magnitude : mi[k];
+        }
+        double *restrict rew = a->reward + j0;
+        char *restrict ended = a->terminated + j0;
+        errors(b, ref0, ref1, m0, m1, integral0 + j0, integral1 + j0, action + j0, action + N + j0, a->prev0 + j0,
+               a->prev1 + j0, e0, e1, rew, dt, lim, ew, rw);
+        for (Py_ssize_t k = 0; k < b; k++) { /* termination, its penalty selected per env */
+            const int out = (fabs(y0[k] - ref0[k]) > envelope) | (fabs(y1[k] - ref1[k]) > envelope);
+            const double penalty = cost * (double)(horizon - tc[k] + 1);
+            ended[k] = (char)out;
+            rew[k] = out ? rew[k] - penalty : rew[k];
+        }
+        observations(b, a->values + j0, N, m0, m1, ref0, ref1, e0, e1, integral0 + j0, integral1 + j0,
+                     action + j0, action + N + j0);
+    }
+}
+
 /* task_batch(x, linkage, valve, integral0, integral1, held, prev0, prev1, action, t, r0, r1,
  *            z0, z1, values, reward, terminated, config, table, offsets) -> None
  *
@@ -279,53 +349,11 @@ static PyObject *task_batch(PyObject *self, PyObject *const *args, Py_ssize_t na
         PyErr_NoMemory();
         goto done;
     }
-    double *linkage = io[0], *valve = io[1], *integral0 = io[2], *integral1 = io[3], *held = io[4];
-    const double s0 = config[S0], s1 = config[S1], dt = config[DT], lim = config[LIMIT];
-    const double ew = config[ERROR_WEIGHT], rw = config[RATE_WEIGHT], envelope = config[ENVELOPE];
-    const double magnitude = config[MAGNITUDE], cost = config[COST_BOUND];
-    const long long fault_step = (long long)config[FAULT_STEP], horizon = (long long)config[HORIZON];
-    const int kind = (int)config[FAULT_KIND], index = (int)config[FAULT_INDEX] != 0;
-    double c0[CHUNK], c1[CHUNK], g0[CHUNK], g1[CHUNK], ref0[CHUNK], ref1[CHUNK];
-    double m0[CHUNK], m1[CHUNK], e0[CHUNK], e1[CHUNK];
-    for (Py_ssize_t j0 = 0; j0 < N; j0 += CHUNK) {
-        const Py_ssize_t b = N - j0 < CHUNK ? N - j0 : CHUNK;
-        const long long *tc = t + j0;
-        commands(&p, action, N, j0, b, t, config[SCALE], c0, c1, g0, g1);
-        double *ci = index ? c1 : c0;
-        if (kind == STUCK_VALVE) {
-            for (Py_ssize_t k = 0; k < b; k++) {
-                double h = tc[k] == fault_step + 1 ? ci[k] : held[j0 + k];
-                ci[k] = tc[k] > fault_step ? h : ci[k];
-                held[j0 + k] = h;
-            }
-        } else if (kind == GAIN_LOSS) {
-            for (Py_ssize_t k = 0; k < b; k++)
-                ci[k] = tc[k] > fault_step ? ci[k] * magnitude : ci[k];
-        }
-        plant_chunk(&p, x, linkage, valve, N, j0, b, t, c0, c1, g0, g1, scratch);
-        references(b, nr0 == N ? r0 + j0 : r0, nr0 == N, ref0);
-        references(b, nr1 == N ? r1 + j0 : r1, nr1 == N, ref1);
-        const double *restrict y0 = x + (n - 2) * N + j0, *restrict y1 = x + (n - 1) * N + j0;
-        const float *restrict w0 = z0 + j0, *restrict w1 = z1 + j0;
-        measure(b, y0, y1, w0, w1, s0, s1, m0, m1);
-        if (kind == SENSOR_BIAS) {
-            double *mi = index ? m1 : m0;
-            for (Py_ssize_t k = 0; k < b; k++)
-                mi[k] = tc[k] >= fault_step ? mi[k] + magnitude : mi[k];
-        }
-        double *restrict rew = reward + j0;
-        errors(b, ref0, ref1, m0, m1, integral0 + j0, integral1 + j0, action + j0, action + N + j0, prev0 + j0,
-               prev1 + j0, e0, e1, rew, dt, lim, ew, rw);
-        const double *restrict a0 = action + j0, *restrict a1 = action + N + j0;
-        const double *restrict i0 = integral0 + j0, *restrict i1 = integral1 + j0;
-        for (Py_ssize_t k = 0; k < b; k++) { /* termination: rare, its penalty env by env */
-            const int ended = (fabs(y0[k] - ref0[k]) > envelope) | (fabs(y1[k] - ref1[k]) > envelope);
-            terminated[j0 + k] = (char)ended;
-            if (ended)
-                rew[k] = rew[k] - cost * (double)(horizon - tc[k] + 1);
-        }
-        observations(b, values + j0, N, m0, m1, ref0, ref1, e0, e1, i0, i1, a0, a1);
-    }
+    const Steps steps = {.x = x, .linkage = io[0], .valve = io[1], .integral0 = io[2], .integral1 = io[3],
+                         .held = io[4], .prev0 = prev0, .prev1 = prev1, .action = action, .t = t, .r0 = r0,
+                         .r1 = r1, .z0 = z0, .z1 = z1, .values = values, .reward = reward,
+                         .terminated = terminated, .each0 = nr0 == N, .each1 = nr1 == N, .N = N};
+    task_chunks(&p, &steps, config, scratch);
     result = Py_NewRef(Py_None);
 done:
     PyMem_Free(scratch);
