@@ -19,9 +19,16 @@ from hypothesis import strategies as st
 import ssme_envs  # noqa: F401
 from ssme_envs.envs import episode_streams
 from ssme_envs.envs.episode_draws import ORIGIN_WORDS, EpisodeDraws
-from ssme_envs.envs.episode_streams import STREAM_WORDS, EpisodeStreams, EpisodeTables, episode_source
+from ssme_envs.envs.episode_streams import (
+    STREAM_WORDS,
+    EpisodeStreams,
+    EpisodeTables,
+    episode_source,
+    table_uniforms,
+)
 from ssme_envs.envs.launcher_pitch import LauncherTask
 from ssme_envs.envs.nozzle_task import NozzleTask
+from ssme_envs.envs.references import StreamLayout
 
 needs_kernel = pytest.mark.skipif(episode_streams.KERNEL != "compiled", reason="the draw kernel is not built")
 
@@ -94,6 +101,60 @@ def test_every_step_is_the_whole_episodes_step(kind, seconds, seeds, moves, to_t
         got_refs, got_noise, _ = streams.at(t, int(t.max()), False)
         assert got_refs[0].tobytes() == refs[t, envs].tobytes()
         assert got_noise[0].tobytes() == noise[t, envs].tobytes()
+
+
+# a layout with room for many steps on, a few holds, a turn to sines, and an odd half (the two
+# cursors then take new outputs at alternate steps)
+WIDE_LAYOUT = StreamLayout(half=41, refs_at=82, holds=5, shortest=3, longest=20, amplitude=0.05)
+CALLS = st.lists(
+    st.tuples(
+        st.sampled_from(["all", "all", "all", "ascending", "any"]),  # which envs a call reads
+        st.sampled_from(["next", "next", "next", "same", "jump"]),  # where their steps go
+        st.booleans(),  # sought from their origins (fresh)
+    ),
+    min_size=1,
+    max_size=40,
+)
+
+
+@needs_kernel
+@given(st.integers(1, 1100), st.integers(0, 2**64 - 1), CALLS)
+@settings(max_examples=40, deadline=None)
+def test_the_kernel_gives_the_whole_draws_numbers_for_any_envs(n, seed, calls):
+    """The kernel's ``streams`` against ``table_uniforms`` (numpy over whole draws) for calls on
+    every env (consecutive: eight at a time where AVX-512 runs), on an ascending subset (env by
+    env), and on any envs in any order with repeats (each in its order)."""
+    layout, size = WIDE_LAYOUT, 2 * WIDE_LAYOUT.refs_at
+    rng = np.random.default_rng(seed % 2**32)
+    gens = [np.random.Generator(np.random.PCG64(seed + i)) for i in range(n)]
+    for i, gen in enumerate(gens):
+        gen.random(i % 2, dtype=np.float32)  # odd envs' generators keep a half
+    table = np.stack([twin.random(size, dtype=np.float32) for twin in copy.deepcopy(gens)])
+    origins = np.zeros((n, ORIGIN_WORDS), dtype=np.uint64)
+    episode_streams._KERNEL.start([gen.bit_generator.capsule for gen in gens], np.arange(n), size, origins)
+    cursors = np.zeros((STREAM_WORDS, n), dtype=np.uint64)
+    cursors[0] = episode_streams._UNSET
+    codes = np.array(layout[:5], dtype=np.int64)
+    last = np.zeros(n, dtype=np.int64)
+    for which, move, fresh in calls:
+        if which == "all":
+            envs = np.arange(n)
+        elif which == "ascending":
+            envs = np.flatnonzero(rng.random(n) < 0.7)
+        else:
+            envs = rng.integers(0, n, size=rng.integers(1, 2 * n + 1))
+        jump = rng.integers(0, 2 * layout.half, len(envs))
+        t = np.minimum({"next": last[envs] + 1, "same": last[envs], "jump": jump}[move], 2 * layout.half - 1)
+        restarted = rng.random(len(envs)) < 0.1  # some start again from step 0
+        t[restarted] = 0
+        got = np.empty(len(envs)), np.empty(len(envs), np.float32), np.empty(len(envs), np.float32)
+        want = np.empty(len(envs)), np.empty(len(envs), np.float32), np.empty(len(envs), np.float32)
+        kernel = episode_streams._KERNEL
+        sines = kernel.streams(origins, envs, t, cursors, codes, layout.amplitude, fresh, *got)
+        assert sines == table_uniforms(table, envs, t, layout, *want)
+        for a, b in zip(got, want, strict=True):
+            assert a.tobytes() == b.tobytes()
+        last[envs] = t
 
 
 @needs_kernel

@@ -89,8 +89,8 @@ def _kernel_agrees(kernel: object) -> bool:
     origins = np.zeros((n, ORIGIN_WORDS), dtype=np.uint64)
     envs = np.arange(n)
     kernel.start([rng.bit_generator.capsule for rng in rngs], envs, size, origins)
-    cursors = np.zeros((n, STREAM_WORDS), dtype=np.uint64)
-    cursors[:, 0] = _UNSET
+    cursors = np.zeros((STREAM_WORDS, n), dtype=np.uint64)
+    cursors[_AT] = _UNSET
     codes = np.array(layout[:5], dtype=np.int64)
     # a restart, a step on by one of all envs at one step, steps on by one, repeated, skipped,
     # past half (sines) and across holds
@@ -124,8 +124,8 @@ class EpisodeStreams:
         self._codes = np.array(layout[:5], dtype=np.int64)
         n = len(draws.generators)
         self._all = np.arange(n)
-        self._cursors = np.zeros((n, STREAM_WORDS), dtype=np.uint64)
-        self._cursors[:, 0] = _UNSET
+        self._cursors = np.zeros((STREAM_WORDS, n), dtype=np.uint64)  # a row per word
+        self._cursors[_AT] = _UNSET
 
     def restart(self, envs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Step 0 of the new episodes of ``envs`` (int64 indices): references and noise (1, k)."""
@@ -134,8 +134,8 @@ class EpisodeStreams:
     def begin(self, envs: np.ndarray) -> None:
         """Make the next :meth:`at` read the new episodes of ``envs`` (after ``draws.start``) from
         their origins, as :meth:`restart` does: cursors at no step and on no hold."""
-        self._cursors[envs, _AT] = _UNSET
-        self._cursors[envs, _HOLD] = 0  # a hold that ends at step 0: sought again at any step
+        self._cursors[_AT, envs] = _UNSET
+        self._cursors[_HOLD, envs] = 0  # a hold that ends at step 0: sought again at any step
 
     def at(self, t: np.ndarray, t_bound: int, synced: bool) -> tuple[np.ndarray, np.ndarray, int]:
         """Step ``t`` (int64, per sub-env) of every episode: references, noise, and ``t_bound``

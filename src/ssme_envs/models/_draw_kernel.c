@@ -46,7 +46,7 @@ typedef struct {
 #define PREFETCH(address) ((void)(address))
 #endif
 
-enum { ORIGIN = 6, TILE = 16 }; /* an origin: state low, high; inc low, high; has_uint32; uinteger */
+enum { ORIGIN = 6, TILE = 16, STREAM_CHUNK = 512 }; /* an origin: state low, high; inc low, high; has_uint32; uinteger */
 
 /* the jump of n LCG steps: s_n = mult s + sum inc */
 static void jump_of(uint64_t n, u128 *mult, u128 *sum)
@@ -288,7 +288,8 @@ static PyObject *streams(PyObject *self, PyObject *const *args, Py_ssize_t nargs
         PyErr_SetString(PyExc_ValueError, "streams: layout (half, refs_at, holds, shortest, longest) out of range");
         goto done;
     }
-    int synced = 1;
+    int synced = 1, ascending = 1, consecutive = 1;
+    Py_ssize_t sines = 0;
     for (Py_ssize_t j = 0; j < k; j++) {
         if (t[j] < 0 || t[j] >= 2 * l.half) {
             PyErr_Format(PyExc_ValueError, "streams: step %lld outside 0..%lld", (long long)t[j],
@@ -296,13 +297,34 @@ static PyObject *streams(PyObject *self, PyObject *const *args, Py_ssize_t nargs
             goto done;
         }
         synced &= t[j] == t[0];
-    }
-    Jumps jumps = {.used = 0};
-    Py_ssize_t sines = 0;
-    for (Py_ssize_t j = 0; j < k; j++) {
-        stream_step(cursors + STREAM_WORDS * envs[j], origins + ORIGIN * envs[j], t[j], fresh, synced, &l, &jumps,
-                    radius + j, angle + j, refs + j);
+        ascending &= j == 0 || envs[j] > envs[j - 1];
+        consecutive &= envs[j] == envs[0] + j;
         sines += t[j] >= l.half;
+    }
+    /* the envs that step on first (step_on), then the others in their order (stream_step); where
+     * an env may come twice (envs not ascending) or all restart, every env in its order */
+#if WIDE
+    const int wide = consecutive && k > 0 && __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512dq");
+#endif
+    Jumps jumps = {.used = 0};
+    Py_ssize_t later[STREAM_CHUNK];
+    for (Py_ssize_t j0 = 0; j0 < k; j0 += STREAM_CHUNK) {
+        const Py_ssize_t j1 = k - j0 < STREAM_CHUNK ? k : j0 + STREAM_CHUNK;
+        Py_ssize_t m = 0;
+        if (fresh || !ascending)
+            for (Py_ssize_t j = j0; j < j1; j++)
+                later[m++] = j;
+#if WIDE
+        else if (wide)
+            m = step_on_wide(cursors, n, envs[0], t, j0, j1, l.half, radius, angle, refs, later);
+#endif
+        else
+            m = step_on(cursors, n, envs, t, j0, j1, l.half, synced, radius, angle, refs, later);
+        for (Py_ssize_t i = 0; i < m; i++) {
+            const Py_ssize_t j = later[i];
+            stream_step(cursors + envs[j], n, origins + ORIGIN * envs[j], t[j], fresh, synced, &l, &jumps, radius + j,
+                        angle + j, refs + j);
+        }
     }
     result = PyLong_FromSsize_t(sines);
 done:

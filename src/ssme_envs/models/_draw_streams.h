@@ -111,25 +111,28 @@ static inline void fill(Cursor c, const uint64_t *o, u128 inc, float *col, const
 }
 
 /* An env's cursor words: the step they hold, the radius and angle cursors' states, the episode's
-LCG increment, both cursors' flags, the reference's hold (its first step in the low half, its end in
-the high one) and level. A step on reads these 80 bytes alone, not the origin. */
+ * LCG increment, both cursors' flags, the reference's hold (its first step in the low half, its
+ * end in the high one) and level. A step on reads these alone, not the origin. The cursors are
+ * one row per word ((STREAM_WORDS, N)): word q of env e at cursors[q N + e], so that a step of
+ * consecutive envs loads each word as a vector; W(q) is word q of the env at w (rows s apart). */
 enum { AT, R_LO, R_HI, A_LO, A_HI, INC_LO, INC_HI, FLAGS, HOLD, LEVEL, STREAM_WORDS };
 enum { NO_END = 0xffffffffu }; /* the last hold's end: past every step */
+#define W(q) w[(q) * s]
 
 typedef struct {
     int64_t half, refs_at, holds, shortest, longest;
     double amplitude;
 } Layout;
 
-static inline void store(uint64_t *w, const Cursor *c)
+static inline void store(uint64_t *w, Py_ssize_t s, int lo, const Cursor *c)
 {
-    w[0] = (uint64_t)c->s;
-    w[1] = (uint64_t)(c->s >> 64);
+    W(lo) = (uint64_t)c->s;
+    W(lo + 1) = (uint64_t)(c->s >> 64);
 }
 
-static inline Cursor load(const uint64_t *w, uint64_t flag)
+static inline Cursor load(const uint64_t *w, Py_ssize_t s, int lo, uint64_t flag)
 {
-    Cursor c = {join(w[0], w[1]), flag};
+    Cursor c = {join(W(lo), W(lo + 1)), flag};
     return c;
 }
 
@@ -144,7 +147,8 @@ static inline Cursor load(const uint64_t *w, uint64_t flag)
 /* The reference's hold at step t and its level: holds of shortest + floor(u (longest - shortest
  * + 1)) steps from the first `holds` uniforms at refs_at, levels (2 u - 1) amplitude from the next
  * `holds`; into the words HOLD (the hold's steps) and LEVEL. */
-static COLD void find_hold(uint64_t *w, const uint64_t *o, int64_t t, const Layout *l, Jumps *jumps)
+static COLD void find_hold(uint64_t *w, Py_ssize_t s, const uint64_t *o, int64_t t, const Layout *l,
+                           Jumps *jumps)
 {
     const u128 inc = join(o[2], o[3]);
     Cursor u = seek(o, (uint64_t)l->refs_at, jumps);
@@ -165,38 +169,38 @@ static COLD void find_hold(uint64_t *w, const uint64_t *o, int64_t t, const Layo
         advance(&u, inc);
     double level = 2.0 * (double)number(&u, o) - 1.0;
     level *= l->amplitude;
-    w[HOLD] = (uint64_t)begin | ((uint64_t)end << 32);
-    memcpy(&w[LEVEL], &level, sizeof level);
+    W(HOLD) = (uint64_t)begin | ((uint64_t)end << 32);
+    memcpy(&W(LEVEL), &level, sizeof level);
 }
 
 /* the radius and angle cursors of step t sought from the origin (a restart, or a step that is
  * neither the one held nor the next): out of the loop's hot path */
-static COLD void seek_pair(uint64_t *w, const uint64_t *o, int64_t t, const Layout *l, Jumps *jumps, Cursor *r,
-                           Cursor *a)
+static COLD void seek_pair(uint64_t *w, Py_ssize_t s, const uint64_t *o, int64_t t, const Layout *l,
+                           Jumps *jumps, Cursor *r, Cursor *a)
 {
     const int cosine = t < l->half;
     *r = seek(o, (uint64_t)(cosine ? t : t - l->half), jumps);
     *a = seek(o, (uint64_t)(cosine ? l->half + t : t), jumps);
-    w[INC_LO] = o[2];
-    w[INC_HI] = o[3];
+    W(INC_LO) = o[2];
+    W(INC_HI) = o[3];
 }
 
 /* One env at step t: its radius and angle uniforms (row t of normal_rows: u_t and u_half+t, or
  * u_t-half and u_t from t = half on) and its reference; the cursors move on from the step they
  * hold where t is that step or the next, and are sought from the origin otherwise (or fresh);
  * synced: every env of the call at one step. */
-static inline void stream_step(uint64_t *w, const uint64_t *o, int64_t t, int fresh, int synced,
+static inline void stream_step(uint64_t *w, Py_ssize_t s, const uint64_t *o, int64_t t, int fresh, int synced,
                                const Layout *l, Jumps *jumps, float *radius, float *angle, double *ref)
 {
     Cursor r, a;
-    const int64_t held = (int64_t)w[AT];
+    const int64_t held = (int64_t)W(AT);
     if (!fresh && held == t) {
-        r = load(w + R_LO, w[FLAGS] & 3);
-        a = load(w + A_LO, w[FLAGS] >> 2);
+        r = load(w, s, R_LO, W(FLAGS) & 3);
+        a = load(w, s, A_LO, W(FLAGS) >> 2);
     } else if (!fresh && held + 1 == t && t != l->half) {
-        const u128 inc = join(w[INC_LO], w[INC_HI]);
-        r = load(w + R_LO, w[FLAGS] & 3);
-        a = load(w + A_LO, w[FLAGS] >> 2);
+        const u128 inc = join(W(INC_LO), W(INC_HI));
+        r = load(w, s, R_LO, W(FLAGS) & 3);
+        a = load(w, s, A_LO, W(FLAGS) >> 2);
         if (synced) {
             advance(&r, inc);
             advance(&a, inc);
@@ -205,18 +209,62 @@ static inline void stream_step(uint64_t *w, const uint64_t *o, int64_t t, int fr
             advance_unforeseen(&a, inc);
         }
     } else {
-        seek_pair(w, o, t, l, jumps, &r, &a);
+        seek_pair(w, s, o, t, l, jumps, &r, &a);
     }
-    store(w + R_LO, &r);
-    store(w + A_LO, &a);
-    w[FLAGS] = r.flag | a.flag << 2;
-    w[AT] = (uint64_t)t;
+    store(w, s, R_LO, &r);
+    store(w, s, A_LO, &a);
+    W(FLAGS) = r.flag | a.flag << 2;
+    W(AT) = (uint64_t)t;
     *radius = number(&r, o);
     *angle = number(&a, o);
-    const uint64_t hold = w[HOLD];
+    const uint64_t hold = W(HOLD);
     if (fresh || (uint64_t)t < (hold & NO_END) || (uint64_t)t >= (hold >> 32))
-        find_hold(w, o, t, l, jumps);
-    memcpy(ref, &w[LEVEL], sizeof *ref);
+        find_hold(w, s, o, t, l, jumps);
+    memcpy(ref, &W(LEVEL), sizeof *ref);
 }
+
+/* Whether the env at w steps on by one to t inside its reference's hold: what the step of all
+ * but restarts, the noise's turn to sines and a hold's end is. After such an advance a cursor's
+ * flag is 0 or 1: no kept half to read, so no origin either. */
+static inline int steps_on(const uint64_t *w, Py_ssize_t s, uint64_t t, int64_t half)
+{
+    const uint64_t hold = W(HOLD);
+    return W(AT) + 1 == t && t != (uint64_t)half && t >= (hold & NO_END) && t < (hold >> 32);
+}
+
+/* The envs j of [j0, j1) that step on (steps_on): their cursors moved and values written as
+ * stream_step would; the others' j into later, their count returned, for stream_step. */
+static Py_ssize_t step_on(uint64_t *cursors, Py_ssize_t s, const int64_t *envs, const int64_t *t, Py_ssize_t j0,
+                          Py_ssize_t j1, int64_t half, int synced, float *radius, float *angle, double *refs,
+                          Py_ssize_t *later)
+{
+    Py_ssize_t m = 0;
+    for (Py_ssize_t j = j0; j < j1; j++) {
+        uint64_t *w = cursors + envs[j];
+        if (!steps_on(w, s, (uint64_t)t[j], half)) {
+            later[m++] = j;
+            continue;
+        }
+        const u128 inc = join(W(INC_LO), W(INC_HI));
+        Cursor r = load(w, s, R_LO, W(FLAGS) & 3), a = load(w, s, A_LO, W(FLAGS) >> 2);
+        if (synced) {
+            advance(&r, inc);
+            advance(&a, inc);
+        } else {
+            advance_unforeseen(&r, inc);
+            advance_unforeseen(&a, inc);
+        }
+        store(w, s, R_LO, &r);
+        store(w, s, A_LO, &a);
+        W(FLAGS) = r.flag | a.flag << 2;
+        W(AT) = (uint64_t)t[j];
+        radius[j] = number(&r, NULL);
+        angle[j] = number(&a, NULL);
+        memcpy(refs + j, &W(LEVEL), sizeof *refs);
+    }
+    return m;
+}
+
+#include "_draw_wide.h"
 
 #endif /* SSME_ENVS_DRAW_STREAMS_H */
