@@ -23,7 +23,14 @@ class BuildExt(build_ext):
 
 
 # included by the kernels
-HEADERS = ("_buffers.h", "_clones.h", "_joint_arithmetic.h", "_engine_arithmetic.h", "_draw_streams.h", "_draw_wide.h")
+HEADERS = (
+    "_buffers.h",
+    "_clones.h",
+    "_joint_arithmetic.h",
+    "_engine_arithmetic.h",
+    "_draw_streams.h",
+    "_draw_wide.h",
+)
 
 setup(
     ext_modules=[
