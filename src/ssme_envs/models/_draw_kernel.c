@@ -308,6 +308,11 @@ static PyObject *streams(PyObject *self, PyObject *const *args, Py_ssize_t nargs
 #endif
     Jumps jumps = {.used = 0};
     Py_ssize_t later[STREAM_CHUNK];
+#if WIDE
+    Restarts restarts;
+    if (wide)
+        restarts_of(&l, &jumps, &restarts);
+#endif
     for (Py_ssize_t j0 = 0; j0 < k; j0 += STREAM_CHUNK) {
         const Py_ssize_t j1 = k - j0 < STREAM_CHUNK ? k : j0 + STREAM_CHUNK;
         Py_ssize_t m = 0;
@@ -316,7 +321,7 @@ static PyObject *streams(PyObject *self, PyObject *const *args, Py_ssize_t nargs
                 later[m++] = j;
 #if WIDE
         else if (wide)
-            m = step_on_wide(cursors, n, envs[0], t, j0, j1, l.half, radius, angle, refs, later);
+            m = step_on_wide(cursors, n, origins, envs[0], t, j0, j1, &l, &restarts, radius, angle, refs, later);
 #endif
         else
             m = step_on(cursors, n, envs, t, j0, j1, l.half, synced, radius, angle, refs, later);

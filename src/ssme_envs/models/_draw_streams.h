@@ -45,20 +45,25 @@ typedef struct {
     uint64_t flag;
 } Cursor;
 
+/* Where number q lies for a generator that kept a half (h) or not: its cursor is (mult s0 + sum
+ * inc, flag) from the origin's state s0 and increment inc */
+static inline void seek_jump(uint64_t q, uint64_t h, Jumps *jumps, u128 *mult, u128 *sum, uint64_t *flag)
+{
+    if (h && q == 0) { /* the kept half: the origin's state as it is */
+        *mult = 1, *sum = 0, *flag = 2;
+        return;
+    }
+    const uint64_t f = q - h; /* the new half f: output f / 2 + 1, its high half where f is odd */
+    jump_cached(jumps, f / 2 + 1, mult, sum);
+    *flag = f & 1;
+}
+
 static inline Cursor seek(const uint64_t *o, uint64_t q, Jumps *jumps)
 {
     Cursor c;
-    const uint64_t h = o[4] != 0;
-    if (h && q == 0) {
-        c.s = join(o[0], o[1]);
-        c.flag = 2;
-        return c;
-    }
-    const uint64_t f = q - h; /* the new half f: output f / 2 + 1, its high half where f is odd */
     u128 mult, sum;
-    jump_cached(jumps, f / 2 + 1, &mult, &sum);
+    seek_jump(q, o[4] != 0, jumps, &mult, &sum, &c.flag);
     c.s = mult * join(o[0], o[1]) + sum * join(o[2], o[3]);
-    c.flag = f & 1;
     return c;
 }
 
