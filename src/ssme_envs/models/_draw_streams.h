@@ -190,6 +190,32 @@ static COLD void seek_pair(uint64_t *w, Py_ssize_t s, const uint64_t *o, int64_t
     W(INC_HI) = o[3];
 }
 
+/* the radius and angle cursors of the env at w: as held (move 0) or moved on by a number */
+static inline void held_pair(const uint64_t *w, Py_ssize_t s, int move, int synced, Cursor *r, Cursor *a)
+{
+    *r = load(w, s, R_LO, W(FLAGS) & 3);
+    *a = load(w, s, A_LO, W(FLAGS) >> 2);
+    if (!move)
+        return;
+    const u128 inc = join(W(INC_LO), W(INC_HI));
+    if (synced) {
+        advance(r, inc);
+        advance(a, inc);
+    } else {
+        advance_unforeseen(r, inc);
+        advance_unforeseen(a, inc);
+    }
+}
+
+/* the cursors r and a kept as the env's at step t */
+static inline void keep_pair(uint64_t *w, Py_ssize_t s, uint64_t t, const Cursor *r, const Cursor *a)
+{
+    store(w, s, R_LO, r);
+    store(w, s, A_LO, a);
+    W(FLAGS) = r->flag | a->flag << 2;
+    W(AT) = t;
+}
+
 /* One env at step t: its radius and angle uniforms (row t of normal_rows: u_t and u_half+t, or
  * u_t-half and u_t from t = half on) and its reference; the cursors move on from the step they
  * hold where t is that step or the next, and are sought from the origin otherwise (or fresh);
@@ -199,27 +225,11 @@ static inline void stream_step(uint64_t *w, Py_ssize_t s, const uint64_t *o, int
 {
     Cursor r, a;
     const int64_t held = (int64_t)W(AT);
-    if (!fresh && held == t) {
-        r = load(w, s, R_LO, W(FLAGS) & 3);
-        a = load(w, s, A_LO, W(FLAGS) >> 2);
-    } else if (!fresh && held + 1 == t && t != l->half) {
-        const u128 inc = join(W(INC_LO), W(INC_HI));
-        r = load(w, s, R_LO, W(FLAGS) & 3);
-        a = load(w, s, A_LO, W(FLAGS) >> 2);
-        if (synced) {
-            advance(&r, inc);
-            advance(&a, inc);
-        } else {
-            advance_unforeseen(&r, inc);
-            advance_unforeseen(&a, inc);
-        }
-    } else {
+    if (!fresh && (held == t || (held + 1 == t && t != l->half)))
+        held_pair(w, s, held != t, synced, &r, &a);
+    else
         seek_pair(w, s, o, t, l, jumps, &r, &a);
-    }
-    store(w, s, R_LO, &r);
-    store(w, s, A_LO, &a);
-    W(FLAGS) = r.flag | a.flag << 2;
-    W(AT) = (uint64_t)t;
+    keep_pair(w, s, (uint64_t)t, &r, &a);
     *radius = number(&r, o);
     *angle = number(&a, o);
     const uint64_t hold = W(HOLD);
@@ -250,19 +260,9 @@ static Py_ssize_t step_on(uint64_t *cursors, Py_ssize_t s, const int64_t *envs, 
             later[m++] = j;
             continue;
         }
-        const u128 inc = join(W(INC_LO), W(INC_HI));
-        Cursor r = load(w, s, R_LO, W(FLAGS) & 3), a = load(w, s, A_LO, W(FLAGS) >> 2);
-        if (synced) {
-            advance(&r, inc);
-            advance(&a, inc);
-        } else {
-            advance_unforeseen(&r, inc);
-            advance_unforeseen(&a, inc);
-        }
-        store(w, s, R_LO, &r);
-        store(w, s, A_LO, &a);
-        W(FLAGS) = r.flag | a.flag << 2;
-        W(AT) = (uint64_t)t[j];
+        Cursor r, a;
+        held_pair(w, s, 1, synced, &r, &a);
+        keep_pair(w, s, (uint64_t)t[j], &r, &a);
         radius[j] = number(&r, NULL);
         angle[j] = number(&a, NULL);
         memcpy(refs + j, &W(LEVEL), sizeof *refs);
