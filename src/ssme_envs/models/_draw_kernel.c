@@ -252,9 +252,10 @@ done:
 
 /* streams(origins, envs, t, cursors, layout, amplitude, fresh, refs, radius, angle): for each env
  * e = envs[j] at step t[j] >= 0, refs[j] <- its random_steps reference, radius[j] and angle[j] <-
- * the uniforms of its Box-Muller noise (_draw_streams.h), reading and moving cursors[e]
- * (STREAM_WORDS words; fresh: sought from the origin, as after a restart). layout = (half,
- * refs_at, holds, shortest, longest). Returns how many t[j] >= half (their noise is a sine). */
+ * the uniforms of its Box-Muller noise (_draw_streams.h), reading and moving its cursor words
+ * (cursors: (STREAM_WORDS, N), a row per word; fresh: sought from the origin, as after a
+ * restart). layout = (half, refs_at, holds, shortest, longest). Returns how many t[j] >= half
+ * (their noise is a sine). */
 static PyObject *streams(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
     if (nargs != 10) {

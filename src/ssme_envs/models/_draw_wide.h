@@ -1,9 +1,11 @@
-/* step_on for consecutive envs where AVX-512 (F and DQ) runs: eight envs a vector, each lane the
- * operations of step_on's env on 64-bit integers: the 128-bit LCG step from 32-bit products
- * (x86 vectors have no 64 x 64 -> 128-bit product), the output's rotation and the uniform's
- * conversion, all exact, so the bits are step_on's (the import check compares them). Included
- * by _draw_streams.h alone, after step_on. WIDE: whether this machine's compiler builds it; a
- * caller also asks the CPU (__builtin_cpu_supports). */
+/* The streams' common envs eight at a time where AVX-512 (F and DQ) runs, for a call on
+ * consecutive envs: those that step on (step_on's), then those at step 0 (stream_step's
+ * restart), packed into whole vectors. Each lane gets the operations of its env on 64-bit
+ * integers: the 128-bit LCG products from 32-bit ones (x86 vectors have no 64 x 64 -> 128-bit
+ * product), the output's rotation, the uniform's conversion and the first hold's float steps,
+ * all exact or in the scalar order, so the bits are the scalar paths' (the import check and the
+ * tests compare them). Included by _draw_streams.h alone, after step_on. WIDE: whether this
+ * machine's compiler builds it; a caller also asks the CPU (__builtin_cpu_supports). */
 #ifndef SSME_ENVS_DRAW_WIDE_H
 #define SSME_ENVS_DRAW_WIDE_H
 
