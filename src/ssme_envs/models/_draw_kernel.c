@@ -46,7 +46,9 @@ typedef struct {
 #define PREFETCH(address) ((void)(address))
 #endif
 
-enum { ORIGIN = 6, TILE = 16, STREAM_CHUNK = 512 }; /* an origin: state low, high; inc low, high; has_uint32; uinteger */
+/* an origin's words: state low, high; inc low, high; has_uint32; uinteger. STREAM_CHUNK: the envs
+ * a streams call sorts at a time */
+enum { ORIGIN = 6, TILE = 16, STREAM_CHUNK = 512 };
 
 /* the jump of n LCG steps: s_n = mult s + sum inc */
 static void jump_of(uint64_t n, u128 *mult, u128 *sum)

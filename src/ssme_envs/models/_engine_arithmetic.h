@@ -1,8 +1,8 @@
 /* The SSME engine's arithmetic, compiled: one engine's valves and dynamics (engine_one) and the
  * stages of the batch step (the plant, commands, measurements, references, observations and
  * errors of a chunk of envs), with no Python in them. Included by _engine_kernel.c alone (after
- * Python.h, math.h and string.h), which reads and checks the arguments; its notes on the bits
- * hold here. */
+ * Python.h, math.h, string.h and _clones.h), which reads and checks the arguments; its notes on
+ * the bits hold here, at every width the clones run (plant_chunk's and task_chunks'). */
 #ifndef SSME_ENVS_ENGINE_ARITHMETIC_H
 #define SSME_ENVS_ENGINE_ARITHMETIC_H
 
