@@ -291,8 +291,9 @@ class TrackingVectorEnv(VectorEnv):
             if fresh is not None:
                 self._reset_state(fresh, plants)
                 self._rewind(fresh)
-                reward[fresh] = 0.0
-                terminated[fresh] = False
+                if not observed:  # a task that observes restarts gave them reward 0, not terminated
+                    reward[fresh] = 0.0
+                    terminated[fresh] = False
                 truncated[fresh] = False
             np.logical_or(terminated, truncated, out=self._autoreset)
             infos = step_infos

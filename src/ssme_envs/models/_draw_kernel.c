@@ -291,7 +291,7 @@ static PyObject *streams(PyObject *self, PyObject *const *args, Py_ssize_t nargs
         PyErr_SetString(PyExc_ValueError, "streams: layout (half, refs_at, holds, shortest, longest) out of range");
         goto done;
     }
-    int synced = 1, ascending = 1, consecutive = 1;
+    int synced = 1, ascending = 1, consecutive = 1, restart = 0;
     Py_ssize_t sines = 0;
     for (Py_ssize_t j = 0; j < k; j++) {
         if (t[j] < 0 || t[j] >= 2 * l.half) {
@@ -302,6 +302,7 @@ static PyObject *streams(PyObject *self, PyObject *const *args, Py_ssize_t nargs
         synced &= t[j] == t[0];
         ascending &= j == 0 || envs[j] > envs[j - 1];
         consecutive &= envs[j] == envs[0] + j;
+        restart |= t[j] == 0;
         sines += t[j] >= l.half;
     }
     /* the envs that step on first (step_on), then the others in their order (stream_step); where
@@ -313,7 +314,7 @@ static PyObject *streams(PyObject *self, PyObject *const *args, Py_ssize_t nargs
     Py_ssize_t later[STREAM_CHUNK];
 #if WIDE
     Restarts restarts;
-    if (wide)
+    if (wide && restart) /* the restarts' jumps, where some env is at step 0 */
         restarts_of(&l, &jumps, &restarts);
 #endif
     for (Py_ssize_t j0 = 0; j0 < k; j0 += STREAM_CHUNK) {

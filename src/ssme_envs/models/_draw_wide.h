@@ -88,18 +88,14 @@ static void restarts_of(const Layout *l, Jumps *jumps, Restarts *r)
         }
 }
 
-/* a per-lane pick of a restart's number q: the kept generators' entry where kept, else the other */
-static inline AVX512 __m512i pick(__mmask8 kept, const uint64_t (*entry)[STARTS], int q)
+/* per lane, the kept generators' value (if_kept) where kept, else the other's */
+static inline AVX512 __m512i pick(__mmask8 kept, uint64_t if_not, uint64_t if_kept)
 {
-    return _mm512_mask_blend_epi64(kept, _mm512_set1_epi64((long long)entry[0][q]),
-                                   _mm512_set1_epi64((long long)entry[1][q]));
+    return _mm512_mask_blend_epi64(kept, _mm512_set1_epi64((long long)if_not), _mm512_set1_epi64((long long)if_kept));
 }
 
-static inline AVX512 __m512i pick_word(__mmask8 kept, const uint64_t (*entry)[STARTS][2], int q, int word)
-{
-    return _mm512_mask_blend_epi64(kept, _mm512_set1_epi64((long long)entry[0][q][word]),
-                                   _mm512_set1_epi64((long long)entry[1][q][word]));
-}
+/* the first `count` of eight lanes (all eight from eight on) */
+static inline __mmask8 first_lanes(Py_ssize_t count) { return count >= 8 ? 0xff : (__mmask8)((1u << count) - 1); }
 
 /* The restart of envs env (a vector of env indices; lanes `lanes`) at step 0: stream_step's
  * seek_pair, numbers and find_hold (at step 0 the first hold, whose level is number refs_at +
@@ -119,14 +115,16 @@ static AVX512 void restart_wide(uint64_t *cursors, Py_ssize_t s, const uint64_t 
     __m256 u[STARTS];
     for (int q = 0; q < STARTS; q++) { /* each cursor mult s0 + sum inc, and its number */
         __m512i c_lo, c_hi;
-        mul_wide(o[0], o[1], pick_word(kept, r->mult, q, 0), pick_word(kept, r->mult, q, 1), &lo[q], &hi[q]);
-        mul_wide(o[2], o[3], pick_word(kept, r->sum, q, 0), pick_word(kept, r->sum, q, 1), &c_lo, &c_hi);
+        mul_wide(o[0], o[1], pick(kept, r->mult[0][q][0], r->mult[1][q][0]),
+                 pick(kept, r->mult[0][q][1], r->mult[1][q][1]), &lo[q], &hi[q]);
+        mul_wide(o[2], o[3], pick(kept, r->sum[0][q][0], r->sum[1][q][0]), pick(kept, r->sum[0][q][1], r->sum[1][q][1]),
+                 &c_lo, &c_hi);
         add_wide(&lo[q], &hi[q], c_lo, c_hi);
-        flag[q] = pick(kept, r->flag, q);
+        flag[q] = pick(kept, r->flag[0][q], r->flag[1][q]);
         u[q] = number_wide(lo[q], hi[q], flag[q], o[5]);
     }
-    /* the first hold: [0, shortest + floor(u (longest - shortest + 1))), an end past NO_END at
-     * it; its level (2 u - 1) amplitude */
+    /* the first hold: [0, shortest + floor(u (longest - shortest + 1))), an end beyond NO_END
+     * held at NO_END; its level (2 u - 1) amplitude */
     __m512d x = _mm512_mul_pd(_mm512_cvtps_pd(u[2]), _mm512_set1_pd((double)(l->longest - l->shortest + 1)));
     x = _mm512_roundscale_pd(x, _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC);
     __m512i end = _mm512_add_epi64(_mm512_set1_epi64(l->shortest), _mm512_cvttpd_epi64(x));
@@ -155,7 +153,7 @@ static AVX512 Py_ssize_t step_on_wide(uint64_t *cursors, Py_ssize_t s, const uin
     const __m512i one = _mm512_set1_epi64(1), iota = _mm512_set_epi64(7, 6, 5, 4, 3, 2, 1, 0);
     Py_ssize_t m = 0, f = 0, firsts[STREAM_CHUNK];
     for (Py_ssize_t j = j0; j < j1; j += 8) {
-        const __mmask8 lanes = j1 - j >= 8 ? 0xff : (__mmask8)((1u << (j1 - j)) - 1);
+        const __mmask8 lanes = first_lanes(j1 - j);
         uint64_t *w = cursors + e0 + j;
         const __m512i tv = _mm512_maskz_loadu_epi64(lanes, t + j);
         const __m512i at = _mm512_maskz_loadu_epi64(lanes, &W(AT));
@@ -192,7 +190,7 @@ static AVX512 Py_ssize_t step_on_wide(uint64_t *cursors, Py_ssize_t s, const uin
         _mm512_mask_storeu_epi64(refs + j, on, _mm512_maskz_loadu_epi64(on, &W(LEVEL)));
     }
     for (Py_ssize_t i = 0; i < f; i += 8) { /* the restarts, eight a vector */
-        const __mmask8 lanes = f - i >= 8 ? 0xff : (__mmask8)((1u << (f - i)) - 1);
+        const __mmask8 lanes = first_lanes(f - i);
         const __m512i j = _mm512_maskz_loadu_epi64(lanes, firsts + i);
         restart_wide(cursors, s, origins, _mm512_add_epi64(j, _mm512_set1_epi64(e0)), j, lanes, restarts, l, radius,
                      angle, refs);
