@@ -30,6 +30,7 @@ from ssme_envs import bench
 from ssme_envs.envs import catalogue, episode_draws
 from ssme_envs.envs.engine_task import EngineTask
 from ssme_envs.envs.episode_draws import EpisodeDraws
+from ssme_envs.envs.episode_streams import EpisodeStreams
 from ssme_envs.envs.launcher_pitch import LauncherTask
 from ssme_envs.envs.nozzle_task import NozzleTask
 from ssme_envs.envs.task import FLOATS
@@ -161,6 +162,71 @@ def generator_call(draw: int, rounds: int) -> float:
     return _best(run, N, rounds)
 
 
+def noise_normals(channels: int, rounds: int) -> float:
+    """Seconds of one vector step's unit sensor noise for N envs from its two uniforms per env,
+    with the fewest of numpy's float32 ufuncs that give the envs' noise its bits
+    (``references.normal_pairs``, ``episode_streams.box_muller``): one Box-Muller pair per env,
+    its cosine for one channel and its sine for a second."""
+    rng = np.random.default_rng(0)
+    u, v = rng.random(N, dtype=np.float32), rng.random(N, dtype=np.float32)
+    radius, angle = np.empty(N, dtype=np.float32), np.empty(N, dtype=np.float32)
+    waves = list(np.empty((channels, N), dtype=np.float32))
+    pairs = list(zip((np.cos, np.sin)[:channels], waves, strict=True))
+    two_pi = np.float32(2.0 * np.pi)
+
+    def run(steps: int) -> float:
+        start = timeit.default_timer()
+        for _ in range(steps):
+            np.negative(u, out=radius)
+            np.log1p(radius, out=radius)
+            np.multiply(radius, -2.0, out=radius)
+            np.sqrt(radius, out=radius)
+            np.multiply(v, two_pi, out=angle)
+            for wave, out in pairs:
+                wave(angle, out=out)
+                np.multiply(out, radius, out=out)
+        return timeit.default_timer() - start
+
+    return _best(run, 200, rounds)
+
+
+def bulk_uniforms(rounds: int) -> float:
+    """Seconds to draw two float32 uniforms per env for N envs at numpy's own bulk speed: one
+    generator filling 2 N in one call (the envs draw them from N generators, a cursor each)."""
+    rng, out = np.random.default_rng(0), np.empty(2 * N, dtype=np.float32)
+
+    def run(steps: int) -> float:
+        start = timeit.default_timer()
+        for _ in range(steps):
+            rng.random(dtype=np.float32, out=out)
+        return timeit.default_timer() - start
+
+    return _best(run, 200, rounds)
+
+
+def streams_step(rounds: int) -> float:
+    """Seconds of one step of the nozzle's per-step episode streams for N envs stepping on
+    together: each env's two noise uniforms from its own generator's cursors, its reference,
+    and its one channel's normals (``EpisodeStreams.at``)."""
+    task = catalogue.spec("ssme_envs/NozzleTVC-v0").build_task()
+    draws = EpisodeDraws(task.draw_size, [np.random.default_rng(i) for i in range(N)])
+    envs = np.arange(N)
+    steps = min(200, task.horizon)
+
+    def run(_: int) -> float:
+        draws.start(envs)
+        streams = EpisodeStreams(draws, task.stream_layout)
+        streams.restart(envs)
+        t = np.zeros(N, dtype=np.int64)
+        start = timeit.default_timer()
+        for _ in range(steps):
+            t += 1
+            streams.at(t, steps, True)
+        return timeit.default_timer() - start
+
+    return _best(run, steps, rounds)
+
+
 def _x(value: float) -> str:
     return f"{value:.2f}x"
 
@@ -233,6 +299,7 @@ def main() -> None:
         "|---|---|---|---|---|---|---|---|",
     ]
     verdicts = []
+    vectors = {}  # env id: (plant floor, today's step with random actions), seconds for N envs
     for env_id, floors in FLOORS.items():
         joint = plant_on_floats(env_id, rounds)
         verdict = {}
@@ -258,6 +325,8 @@ def main() -> None:
             close()
             bound = cartpole[kind] / (plant + restart_cost)
             verdict[f"vector {kind}"] = (bound >= floors["vector"], cartpole[kind] / ours >= floors["vector"])
+            if kind == "random":
+                vectors[env_id] = (plant, ours)
             shown = (
                 "-"
                 if kind == "zero"
@@ -288,9 +357,59 @@ def main() -> None:
         "task's step beside the plant, the vector bookkeeping) cut to the room the last column "
         "gives.",
         "",
+        *plant_floor_line(vectors, rounds),
     ]
     write_text(RESULTS, "\n".join(lines))
     print("\n".join(lines))
+
+
+def plant_floor_line(vectors: dict[str, tuple[float, float]], rounds: int) -> list[str]:
+    """The section on the issue's line "each vector step within 2x of its plant-arithmetic
+    floor": what the step's sensor noise takes of the room that 2x leaves beside the plant."""
+    lines = [
+        "## Within 2x of the plant floor: the sensor noise in the room",
+        "",
+        f"A vector step within 2x of its plant floor (N = {N}) leaves the floor's own time (the "
+        "room) for all beside the plant. Each step draws every env's unit sensor noise: two float32 uniforms "
+        "per env (a Box-Muller pair), from the env's own generator, turned into normals by "
+        "numpy's float32 ufuncs, which give the noise the bits the scalar env and "
+        "`SyncVectorEnv` give it. Below, those ufuncs alone (the fewest that give those bits) "
+        "and the uniforms drawn at numpy's own bulk speed (one generator filling 2 N in one "
+        "call; the envs draw from N generators), and what is left of the room for everything "
+        "else: the references, the task's step beside the plant (observation, reward, "
+        "termination), the actions' checks and the vector bookkeeping. Today: the step with "
+        "random actions and its share of the floor (the figure `ssme-envs bench` reports).",
+        "",
+        "| env | noise channels | plant floor (the room) | the noise's ufuncs | "
+        "its uniforms, numpy's bulk speed | left for the rest | today: the step | of the floor |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    uniforms, streams = bulk_uniforms(rounds), streams_step(rounds)
+    short = []  # the envs whose noise alone leaves no room
+    for env_id, (plant, ours) in vectors.items():
+        channels = catalogue.spec(env_id).build_task().n_channels
+        normals = noise_normals(channels, rounds)
+        left = plant - normals - uniforms
+        lines.append(
+            f"| {env_id} | {channels} | {plant * 1e6:.1f} us | "
+            f"{normals * 1e6:.1f} us | {uniforms * 1e6:.1f} us | {left * 1e6:.1f} us | "
+            f"{ours * 1e6:.0f} us | {plant / ours:.0%} |"
+        )
+        if left < 0.0:
+            short.append(env_id)
+    lines += [
+        "",
+        f"Where nothing is left ({', '.join(short) or 'none'}), a step within 2x of the floor "
+        "would need the noise's uniforms drawn from the sub-envs' generators faster than numpy "
+        "fills one generator's, and everything else in the step free. The package's fastest "
+        "draw, the nozzle's per-step streams (each env's cursors on its own generator's draw), "
+        f"takes {streams * 1e6:.1f} us for the N envs' uniforms, references and one channel's "
+        f"normals, where numpy's bulk fill and the ufuncs above take "
+        f"{(uniforms + noise_normals(1, rounds)) * 1e6:.1f} us. Elsewhere the last columns say "
+        "how far the rest of the step is from the room.",
+        "",
+    ]
+    return lines
 
 
 if __name__ == "__main__":

@@ -77,31 +77,44 @@ def box_muller(radius: np.ndarray, angle: np.ndarray, sine: bool | np.ndarray) -
 
 def _kernel_agrees(kernel: object) -> bool:
     """Whether the kernel's ``streams`` gives :func:`table_uniforms`' numbers on seeded draws
-    (with and without a kept half), through restarts, steps one at a time, repeated and skipped
-    steps, the noise's turn to sines and the reference's holds."""
+    (with and without a kept half), through restarts (a reset's, and a vector env's at step 0
+    beside envs stepping on: eight a vector where the wide path runs), steps one at a time,
+    repeated and skipped steps, the noise's turn to sines and the reference's holds."""
     layout = StreamLayout(half=7, refs_at=14, holds=4, shortest=3, longest=9, amplitude=0.05)
-    size, n = 22, 4
-    rngs = [np.random.Generator(np.random.PCG64(seed)) for seed in (0, 1, 2**63 + 5, 12345)]
+    size, n = 22, 12
+    rngs = [np.random.Generator(np.random.PCG64(seed)) for seed in (0, 1, 2**63 + 5, 12345, *range(8))]
     for i, rng in enumerate(rngs):
-        rng.random(i % 2, dtype=np.float32)  # envs 1 and 3 hold a kept half
+        rng.random(i % 2, dtype=np.float32)  # the odd envs hold a kept half
     twins = copy.deepcopy(rngs)
     table = np.stack([twin.random(size, dtype=np.float32) for twin in twins])
     origins = np.zeros((n, ORIGIN_WORDS), dtype=np.uint64)
     envs = np.arange(n)
-    kernel.start([rng.bit_generator.capsule for rng in rngs], envs, size, origins)
+    capsules = [rng.bit_generator.capsule for rng in rngs]
+    kernel.start(capsules, envs, size, origins)
     cursors = np.zeros((STREAM_WORDS, n), dtype=np.uint64)
     cursors[_AT] = _UNSET
     codes = np.array(layout[:5], dtype=np.int64)
-    # a restart, a step on by one of all envs at one step, steps on by one, repeated, skipped,
-    # past half (sines) and across holds
-    steps = (
+    # a reset, a step on by one of all envs at one step, steps on by one, repeated, skipped,
+    # past half (sines) and across holds (four envs' steps, for each four envs); then new
+    # episodes for nine envs at step 0 beside the others' next steps, and on through their
+    # first hold's end, a step at a time
+    steps = [
         (0, 0, 0, 0), (1, 1, 1, 1), (1, 0, 2, 5), (2, 1, 3, 6), (3, 9, 3, 7), (13, 10, 4, 8), (6, 11, 12, 13)
-    )  # fmt: skip
-    for row, at in enumerate(steps):
-        fresh, t = row == 0, np.array(at, dtype=np.int64)
+    ]  # fmt: skip
+    at = [np.array(row * (n // 4), dtype=np.int64) for row in steps]
+    restarted = np.array([0, 2, 3, 5, 6, 7, 8, 9, 11])
+    t = np.minimum(at[-1] + 1, 2 * layout.half - 1)
+    t[restarted] = 0
+    at += [np.minimum(t + k, 2 * layout.half - 1) for k in range(layout.longest + 1)]
+    for row, t in enumerate(at):
+        if row == len(steps):  # the vector env's restart: new origins, cursors at no step
+            kernel.start(capsules, restarted, size, origins)
+            table[restarted] = [twins[i].random(size, dtype=np.float32) for i in restarted]
+            cursors[_AT, restarted] = _UNSET
+            cursors[_HOLD, restarted] = 0
         got = np.empty(n), np.empty(n, np.float32), np.empty(n, np.float32)
         want = np.empty(n), np.empty(n, np.float32), np.empty(n, np.float32)
-        sines = kernel.streams(origins, envs, t, cursors, codes, layout.amplitude, fresh, *got)
+        sines = kernel.streams(origins, envs, t, cursors, codes, layout.amplitude, row == 0, *got)
         if sines != table_uniforms(table, envs, t, layout, *want):
             return False
         if any(a.tobytes() != b.tobytes() for a, b in zip(got, want, strict=True)):
