@@ -378,7 +378,8 @@ def plant_floor_line(vectors: dict[str, tuple[float, float]], rounds: int) -> li
         "call; the envs draw from N generators), and what is left of the room for everything "
         "else: the references, the task's step beside the plant (observation, reward, "
         "termination), the actions' checks and the vector bookkeeping. Today: the step with "
-        "random actions and its share of the floor (the figure `ssme-envs bench` reports).",
+        "random actions as timed above, and the floor's share of it (the figure `ssme-envs "
+        "bench` gives as \"of the floor\", there from its own run).",
         "",
         "| env | noise channels | plant floor (the room) | the noise's ufuncs | "
         "its uniforms, numpy's bulk speed | left for the rest | today: the step | of the floor |",
