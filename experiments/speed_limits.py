@@ -162,16 +162,14 @@ def generator_call(draw: int, rounds: int) -> float:
     return _best(run, N, rounds)
 
 
-def noise_normals(channels: int, rounds: int) -> float:
-    """Seconds of one vector step's unit sensor noise for N envs from its two uniforms per env,
-    with the fewest of numpy's float32 ufuncs that give the envs' noise its bits
-    (``references.normal_pairs``, ``episode_streams.box_muller``): one Box-Muller pair per env,
-    its cosine for one channel and its sine for a second."""
+def noise_pairs(rounds: int) -> float:
+    """Seconds of N Box-Muller pairs, float32, from their uniforms: both normals of each pair
+    (cosine and sine), with the fewest of numpy's float32 ufuncs that give the envs' noise its
+    bits (``references.normal_pairs``, ``episode_streams.box_muller``)."""
     rng = np.random.default_rng(0)
     u, v = rng.random(N, dtype=np.float32), rng.random(N, dtype=np.float32)
     radius, angle = np.empty(N, dtype=np.float32), np.empty(N, dtype=np.float32)
-    waves = list(np.empty((channels, N), dtype=np.float32))
-    pairs = list(zip((np.cos, np.sin)[:channels], waves, strict=True))
+    waves = list(zip((np.cos, np.sin), np.empty((2, N), dtype=np.float32), strict=True))
     two_pi = np.float32(2.0 * np.pi)
 
     def run(steps: int) -> float:
@@ -182,7 +180,7 @@ def noise_normals(channels: int, rounds: int) -> float:
             np.multiply(radius, -2.0, out=radius)
             np.sqrt(radius, out=radius)
             np.multiply(v, two_pi, out=angle)
-            for wave, out in pairs:
+            for wave, out in waves:
                 wave(angle, out=out)
                 np.multiply(out, radius, out=out)
         return timeit.default_timer() - start
@@ -190,10 +188,10 @@ def noise_normals(channels: int, rounds: int) -> float:
     return _best(run, 200, rounds)
 
 
-def bulk_uniforms(rounds: int) -> float:
-    """Seconds to draw two float32 uniforms per env for N envs at numpy's own bulk speed: one
-    generator filling 2 N in one call (the envs draw them from N generators, a cursor each)."""
-    rng, out = np.random.default_rng(0), np.empty(2 * N, dtype=np.float32)
+def bulk_uniforms(count: int, rounds: int) -> float:
+    """Seconds to draw ``count`` float32 uniforms at numpy's own bulk speed: one generator
+    filling them in one call (the envs draw theirs from N generators, a cursor each)."""
+    rng, out = np.random.default_rng(0), np.empty(count, dtype=np.float32)
 
     def run(steps: int) -> float:
         start = timeit.default_timer()
@@ -369,27 +367,29 @@ def plant_floor_line(vectors: dict[str, tuple[float, float]], rounds: int) -> li
     lines = [
         "## Within 2x of the plant floor: the sensor noise in the room",
         "",
-        f"A vector step within 2x of its plant floor (N = {N}) leaves the floor's own time (the "
-        "room) for all beside the plant. Each step draws every env's unit sensor noise: two float32 uniforms "
-        "per env (a Box-Muller pair), from the env's own generator, turned into normals by "
-        "numpy's float32 ufuncs, which give the noise the bits the scalar env and "
-        "`SyncVectorEnv` give it. Below, those ufuncs alone (the fewest that give those bits) "
-        "and the uniforms drawn at numpy's own bulk speed (one generator filling 2 N in one "
-        "call; the envs draw from N generators), and what is left of the room for everything "
-        "else: the references, the task's step beside the plant (observation, reward, "
-        "termination), the actions' checks and the vector bookkeeping. Today: the step with "
-        "random actions as timed above, and the floor's share of it (the figure `ssme-envs "
-        "bench` gives as \"of the floor\", there from its own run).",
+        f"A vector step within 2x of its plant floor (N = {N}) leaves the floor's own time "
+        "(the room) for all beside the plant. Each step gives every env a unit sensor noise "
+        "per channel, from the env's own generator: float32 uniforms turned into normals by "
+        "numpy's float32 ufuncs (Box-Muller), which give the noise the bits the scalar env "
+        "and `SyncVectorEnv` give it. A pair of uniforms makes two normals, so an env needs at "
+        "least a uniform and half a pair per channel and step. Below, those pairs' ufuncs alone "
+        "(the fewest that give those bits) and those uniforms drawn at numpy's own bulk speed "
+        "(one generator filling them in one call; the envs draw from N generators), and what "
+        "is left of the room for everything else: the references, the task's step beside the "
+        "plant (observation, reward, termination), the actions' checks and the vector "
+        "bookkeeping. Today: the step with random actions as timed above, and the floor's "
+        'share of it (the figure `ssme-envs bench` gives as "of the floor", there from its '
+        "own run).",
         "",
         "| env | noise channels | plant floor (the room) | the noise's ufuncs | "
         "its uniforms, numpy's bulk speed | left for the rest | today: the step | of the floor |",
         "|---|---|---|---|---|---|---|---|",
     ]
-    uniforms, streams = bulk_uniforms(rounds), streams_step(rounds)
+    pairs, streams = noise_pairs(rounds), streams_step(rounds)
     short = []  # the envs whose noise alone leaves no room
     for env_id, (plant, ours) in vectors.items():
         channels = catalogue.spec(env_id).build_task().n_channels
-        normals = noise_normals(channels, rounds)
+        normals, uniforms = pairs * channels / 2, bulk_uniforms(channels * N, rounds)
         left = plant - normals - uniforms
         lines.append(
             f"| {env_id} | {channels} | {plant * 1e6:.1f} us | "
@@ -404,9 +404,10 @@ def plant_floor_line(vectors: dict[str, tuple[float, float]], rounds: int) -> li
         "would need the noise's uniforms drawn from the sub-envs' generators faster than numpy "
         "fills one generator's, and everything else in the step free. The package's fastest "
         "draw, the nozzle's per-step streams (each env's cursors on its own generator's draw), "
-        f"takes {streams * 1e6:.1f} us for the N envs' uniforms, references and one channel's "
-        f"normals, where numpy's bulk fill and the ufuncs above take "
-        f"{(uniforms + noise_normals(1, rounds)) * 1e6:.1f} us. Elsewhere the last columns say "
+        f"takes {streams * 1e6:.1f} us for the N envs' two uniforms (a pair) each, their "
+        f"references and one channel's normals, where numpy's bulk fill of 2 N uniforms and "
+        f"the pairs' ufuncs above take {(bulk_uniforms(2 * N, rounds) + pairs) * 1e6:.1f} us. "
+        "Elsewhere the last columns say "
         "how far the rest of the step is from the room.",
         "",
     ]
