@@ -247,10 +247,10 @@ def test_a_kernel_that_reads_one_joint_for_every_nozzle_is_refused(monkeypatch) 
     monkeypatch.delenv("SSME_ENVS_NO_KERNEL", raising=False)
     real = nozzle_joint._KERNEL
 
-    def first_joint_for_all(state, tau, h, steps, p):
+    def first_joint_for_all(state, tau, h, steps, p, skip=None):
         if isinstance(p.n, np.ndarray):
             p = p._replace(**{k: v[0] for k, v in p._asdict().items() if isinstance(v, np.ndarray)})
-        real.rk4_batch(state, tau, h, steps, p)
+        real.rk4_batch(state, tau, h, steps, p, skip)
 
     fake = types.ModuleType("ssme_envs.models._joint_kernel")
     fake.set_tables, fake.power, fake.rk4_float = real.set_tables, real.power, real.rk4_float

@@ -302,8 +302,8 @@ def _poisoned(monkeypatch: pytest.MonkeyPatch, threshold: float) -> None:
         out = real_floats(x, v, w, tau, h, steps, p)
         return (math.nan, math.nan, math.nan) if abs(tau) > threshold else out
 
-    def arrays(state, tau, h, steps, p):
-        real_arrays(state, tau, h, steps, p)
+    def arrays(state, tau, h, steps, p, skip=None):
+        real_arrays(state, tau, h, steps, p, skip)
         state[:, np.abs(np.broadcast_to(tau, state.shape[1:])) > threshold] = np.nan
 
     monkeypatch.setattr(nozzle_task, "rk4_floats", floats)

@@ -52,7 +52,6 @@ from ssme_envs.models.nozzle import (
 )
 
 DEG = 180.0 / math.pi
-_OWN_RK4_ARRAYS = rk4_arrays  # the package's, which takes a skip row
 # RK4 substeps per sample by h * rate <= 0.25 (models.nozzle.recommended_substeps): 3 for Table 1,
 # within 3e-4 of the motion on the PRBS test of experiments/results/nozzle_integration_accuracy.md
 # and within half the default sensor noise (1e-4 rad) on 3 deg motions under any torque, ten
@@ -88,13 +87,9 @@ class NozzleState(NamedTuple):
 def integrate(plant: Any, tau: Value, h: float, steps: int, p: RK4Parameters, ops: Carrier) -> Any:
     """``steps`` RK4 steps of the joint under the torque tau held: the plant core's float or
     (in place) array arithmetic, the same operations in the same order (on arrays, the
-    package's own RK4 may leave the carrier's restarting envs, whose state the vector env
-    discards, as they were)."""
+    carrier's restarting envs, whose state the vector env discards, may be left as they were)."""
     if ops.batched:
-        if ops.restarting is not None and rk4_arrays is _OWN_RK4_ARRAYS:
-            rk4_arrays(plant, tau, h, steps, p, skip=ops.restarting)
-        else:  # a substituted integrator (a test's) steps them all
-            rk4_arrays(plant, tau, h, steps, p)
+        rk4_arrays(plant, tau, h, steps, p, skip=ops.restarting)
         return plant
     return rk4_floats(*plant, tau, h, steps, p)
 
