@@ -19,6 +19,7 @@ Writes experiments/results/speed_limits.md.
 from __future__ import annotations
 
 import argparse
+import sys
 import timeit
 from pathlib import Path
 
@@ -240,6 +241,9 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=5, help="best of this many rounds (default: 5)")
     args = parser.parse_args()
     rounds = args.rounds
+    if not 1 <= rounds <= 100:  # no round would give min() nothing to take
+        print(f"error: --rounds must be within 1-100, got {rounds}", file=sys.stderr)
+        raise SystemExit(2)
     pendulum_run, close = bench._single_stepper("Pendulum-v1")
     pendulum = _best(pendulum_run, bench.SINGLE_ROUND_STEPS, rounds)
     close()
