@@ -187,6 +187,12 @@ def _random_steps(
     shortest, longest = _hold_steps(dt)
     # hold j ends at step (j + 1) shortest or later: only the first `live` can end in the block
     live = min(count, (stop - 1) // shortest)
+    refs = np.empty((channels, stop - start, k)) if out is None else out
+    if live == 0:  # the block lies in the first hold (a reset's first block): its levels, held
+        level = 2.0 * uniforms[count : count + channels] - 1.0
+        level *= amplitude.reshape(channels, 1)
+        refs[...] = level[:, None, :]
+        return refs
     ends = shortest + np.floor(uniforms[:live] * (longest - shortest + 1)).astype(np.intp)
     _accumulate_rows(ends)  # integer sums: cumsum's bits, without its strided walk
     # flat index of (hold, episode) at every step: episode i at hold j is j k + i; the block
@@ -201,9 +207,8 @@ def _random_steps(
         index[1:] = 0
         index[ends[rows, cols] - start, cols] = k
         _accumulate_rows(index)
-    else:  # no hold ends in the block (a reset's first block, on every env)
+    else:  # no hold ends in the block
         index[1:] = index[0]
-    refs = np.empty((channels, stop - start, k)) if out is None else out
     for c in range(channels):  # mode "clip" (indices are in range) writes without buffering
         level = 2.0 * uniforms[count + c : count + (live + 1) * channels : channels] - 1.0
         level *= amplitude[c]  # hold h's row is count + h channels + c
