@@ -425,6 +425,47 @@ def test_a_vector_env_too_large_for_memory_is_refused_before_it_is_built(env_id,
     assert gym.make_vec(env_id, num_envs=4, vectorization_mode="vector_entry_point").num_envs == 4
 
 
+def _peak_bytes(env_id: str, num_envs: int) -> int:
+    """tracemalloc's peak over resetting and stepping a vector env through a whole episode and
+    on (zero actions, random ones every 50th step, so that some episodes restart beside others),
+    above the memory before it was made: its tables and what its steps add, not the transients
+    of building its task, which are the same for any number of sub-envs."""
+    import gc
+    import tracemalloc
+
+    gc.collect()
+    tracemalloc.start()
+    try:
+        base = tracemalloc.get_traced_memory()[0]
+        venv = gym.make_vec(env_id, num_envs=num_envs, vectorization_mode="vector_entry_point")
+        tracemalloc.reset_peak()
+        venv.reset(seed=0)
+        rng = np.random.default_rng(0)
+        for k in range(venv.unwrapped.task.horizon + 20):
+            action = rng.uniform(-1.0, 1.0, venv.action_space.shape) if k % 50 == 49 else 0.0
+            venv.step(np.broadcast_to(action, venv.action_space.shape).astype(np.float32))
+        return tracemalloc.get_traced_memory()[1] - base
+    finally:
+        tracemalloc.stop()
+
+
+@pytest.mark.parametrize("env_id", [TRACKING, THROTTLE, NOZZLE, LAUNCHER])
+def test_the_vector_memory_estimate_bounds_what_a_sub_env_allocates(env_id):
+    """The bytes per sub-env that the memory check counts (episode_bytes and SUB_ENV_BYTES)
+    against numpy's allocations as tracemalloc traces them: the slope of the peak between 64 and
+    320 sub-envs (what each sub-env adds, without the fixed costs) is at most the estimate, and
+    the estimate at most 6 times it, so that the check refuses no vector env that would fit by
+    much (it counted the episode tables of the nozzle's streams, about 30 times too many)."""
+    from ssme_envs.envs.episode_streams import episode_bytes
+    from ssme_envs.envs.inputs import SUB_ENV_BYTES
+
+    # first: what a first make caches (the throttle's linked model) is in neither measurement
+    task = gym.make_vec(env_id, num_envs=1, vectorization_mode="vector_entry_point").unwrapped.task
+    estimate = episode_bytes(task) + SUB_ENV_BYTES
+    measured = (_peak_bytes(env_id, 320) - _peak_bytes(env_id, 64)) / 256
+    assert measured <= estimate <= 6 * measured, (measured, estimate)
+
+
 @pytest.mark.parametrize(
     ("env_id", "options", "plain"),
     [

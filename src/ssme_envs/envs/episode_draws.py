@@ -81,7 +81,7 @@ class EpisodeDraws:
         self._origins: np.ndarray | None = None
         self._table: np.ndarray | None = None
         self._table_rows: list[np.ndarray] = []
-        if _KERNEL is not None and all(map(_is_pcg64, self.generators)):
+        if self.pcg64_form() == "origins" and all(map(_is_pcg64, self.generators)):
             self._origins = np.zeros((n, ORIGIN_WORDS), dtype=np.uint64)
         else:
             self._use_table(np.zeros((n, size), dtype=np.float32))
@@ -138,6 +138,17 @@ class EpisodeDraws:
         else:
             out[...] = np.take(self._table[:, lo:hi], envs, axis=0).T
         return out
+
+    @staticmethod
+    def pcg64_form() -> str:
+        """The form of new draws of PCG64 generators (a new vector env's)."""
+        return "table" if _KERNEL is None else "origins"
+
+    @staticmethod
+    def bytes_per_env(size: int, form: str) -> int:
+        """Bytes per sub-env of draws of ``size`` numbers held in ``form``: an origin, or the whole
+        draw in the table."""
+        return 8 * ORIGIN_WORDS if form == "origins" else 4 * size
 
     def uniforms(self, envs: np.ndarray) -> EpisodeUniforms:
         """The draws of the episodes of ``envs`` as the tasks read them (``draw_size`` rows)."""

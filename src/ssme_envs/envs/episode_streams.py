@@ -140,6 +140,12 @@ class EpisodeStreams:
         self._cursors = np.zeros((STREAM_WORDS, n), dtype=np.uint64)  # a row per word
         self._cursors[_AT] = _UNSET
 
+    @staticmethod
+    def bytes_per_env(layout: StreamLayout) -> int:
+        """Bytes per sub-env: its cursors, a step's reference, uniforms and normals, and (read
+        from a table, without the kernel) the step's hold lengths and ends."""
+        return 8 * STREAM_WORDS + 32 + 24 * layout.holds
+
     def restart(self, envs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Step 0 of the new episodes of ``envs`` (int64 indices): references and noise (1, k)."""
         return self._values(envs, np.zeros(len(envs), dtype=np.int64), True)
@@ -189,13 +195,28 @@ class EpisodeSource(Protocol):
         ...
 
 
-def episode_source(task: Any, draws: EpisodeDraws) -> EpisodeSource:
-    """Streams where the task's episodes have a layout (its ``stream_layout``, optional) and they
-    can be read (the kernel, or the draws held as a table), tables otherwise."""
+def _streamed(task: Any, form: str) -> StreamLayout | None:
+    """The task's stream layout (its ``stream_layout``, optional) where its episodes can be read
+    as streams from draws held in ``form`` (the kernel, or a table), else None."""
     layout = getattr(task, "stream_layout", None)
-    if layout is not None and (KERNEL == "compiled" or draws.form == "table"):
-        return EpisodeStreams(draws, layout)
-    return EpisodeTables(task, draws)
+    return layout if layout is not None and (KERNEL == "compiled" or form == "table") else None
+
+
+def episode_source(task: Any, draws: EpisodeDraws) -> EpisodeSource:
+    """Streams where the task's episodes have a layout and they can be read (:func:`_streamed`),
+    tables otherwise."""
+    layout = _streamed(task, draws.form)
+    return EpisodeTables(task, draws) if layout is None else EpisodeStreams(draws, layout)
+
+
+def episode_bytes(task: Any) -> int:
+    """Bytes per sub-env of a new vector env's episodes of ``task``: its draws and the source
+    :func:`episode_source` picks for them (the vector env checks memory with it before making
+    either)."""
+    form = EpisodeDraws.pcg64_form()
+    layout = _streamed(task, form)
+    source = EpisodeTables.bytes_per_env(task) if layout is None else EpisodeStreams.bytes_per_env(layout)
+    return source + EpisodeDraws.bytes_per_env(task.draw_size, form)
 
 
 __all__ = [
@@ -204,6 +225,7 @@ __all__ = [
     "EpisodeSource",
     "EpisodeStreams",
     "box_muller",
+    "episode_bytes",
     "episode_source",
     "table_uniforms",
 ]

@@ -41,6 +41,16 @@ class EpisodeTables:
         # smallest _ready: that spares most steps the (N,) comparison of t with _ready
         self._ready_min = 0
 
+    @staticmethod
+    def bytes_per_env(task: Any) -> int:
+        """Bytes per sub-env: its episode's unit noise (float32) and references (float64, unless
+        every episode shares them) per channel and step, with the temporaries of computing a
+        block (``TRANSIENT_COPIES``), and a block of its draw (float32) read at once."""
+        from ssme_envs.cli_checks import TRANSIENT_COPIES
+
+        per_step = 4 if task.shared_references is not None else 12
+        return per_step * task.n_channels * (task.horizon + 1) * (1 + TRANSIENT_COPIES) + 4 * task.draw_size
+
     def restart(self, envs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Step 0 of the new episodes of ``envs`` (int64 indices): references and noise
         (channels, k), their first block written into the tables."""

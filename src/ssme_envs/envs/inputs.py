@@ -87,22 +87,18 @@ def positive_int(name: str, value: Any) -> int:
     return number
 
 
-# what a sub-env holds beside its episode tables: its generator (a Python object and PCG64's
-# state), state columns, observation and bookkeeping rows, with room to spare
+# what a sub-env holds beside its episodes' draws, references and noise: its generator (a Python
+# object and PCG64's state), state columns, observation and bookkeeping rows, with room to spare
 SUB_ENV_BYTES = 4096
 
 
-def check_vector_memory(task: Any, num_envs: int) -> None:
-    """ValueError when ``num_envs`` sub-envs of ``task`` would not fit in memory: per sub-env its
-    episode's references (float64) and unit noise (float32) per channel and step, with the
-    temporaries of a reset computing them (``TRANSIENT_COPIES``), its uniform draws twice
-    (float32: the table of whole draws held without the draw kernel, and a block read from it),
-    and :data:`SUB_ENV_BYTES`."""
-    from ssme_envs.cli_checks import TRANSIENT_COPIES, check_memory
+def check_vector_memory(num_envs: int, episode_bytes: int) -> None:
+    """ValueError when ``num_envs`` sub-envs would not fit in memory: per sub-env
+    ``episode_bytes`` (what its episodes' source holds and computes,
+    :func:`~ssme_envs.envs.episode_streams.episode_bytes`) and :data:`SUB_ENV_BYTES`."""
+    from ssme_envs.cli_checks import check_memory
 
-    steps = task.n_channels * (task.horizon + 1)
-    tables = 12 * steps * (1 + TRANSIENT_COPIES) + 8 * task.draw_size
-    check_memory("num_envs", num_envs, tables + SUB_ENV_BYTES, "each sub-env's episode tables")
+    check_memory("num_envs", num_envs, episode_bytes + SUB_ENV_BYTES, "each sub-env's episodes")
 
 
 def _floats(values: Iterable[Any], action: Any, name: str = "action") -> list[float] | None:

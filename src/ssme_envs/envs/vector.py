@@ -26,7 +26,7 @@ from gymnasium.vector.utils import batch_space
 from ssme_envs.envs.engine_task import EngineTask
 from ssme_envs.envs.engine_throttle import ThrottleTask
 from ssme_envs.envs.episode_draws import EpisodeDraws
-from ssme_envs.envs.episode_streams import EpisodeSource, episode_source
+from ssme_envs.envs.episode_streams import EpisodeSource, episode_bytes, episode_source
 from ssme_envs.envs.inputs import batch_actions, check_seeds, check_vector_memory, positive_int
 from ssme_envs.envs.launcher_pitch import LauncherTask
 from ssme_envs.envs.nozzle_task import NozzleTask
@@ -94,7 +94,7 @@ class TrackingVectorEnv(VectorEnv):
                 f"autoreset_mode must be one of {[m.value for m in AutoresetMode]}, got {autoreset_mode!r}"
             ) from None
         self.task = self.build_task(**options)
-        check_vector_memory(self.task, num_envs)  # before a table or generator is made
+        check_vector_memory(num_envs, episode_bytes(self.task))  # before a table or generator is made
         # Episodes are drawn at the task's full length, as the scalar env draws them, whatever
         # the time limit, so that both consume their generators alike.
         self._limit = min(self.task.horizon, max_episode_steps or self.task.horizon)
