@@ -196,7 +196,9 @@ def write_main_report(
         "# ssme-envs: identification and controller comparison",
         "",
         f"Command: `ssme-envs report --out {shown or out} --episodes {episodes}` ({seconds:.0f} s). "
-        "Every number below comes from a seeded run and is reproduced bit for bit by the same command.",
+        "Every number below comes from a seeded run and is reproduced bit for bit by the same command on a "
+        "machine of the same CPU family (numpy's float32 log1p, sin and cos, which make the envs' sensor "
+        "noise, differ in their last bits between SIMD builds: see the README's vector env section).",
         "",
         "## Controllers",
         "",
