@@ -10,7 +10,6 @@ that figures from different (shared, noisy) machines can be compared as ratios.
 
 from __future__ import annotations
 
-import argparse
 import time
 
 import numpy as np
@@ -19,6 +18,7 @@ import scipy.linalg
 from ssme_envs.identification.alpha_canonical import identify
 from ssme_envs.identification.pipeline import default_experiment, run_default
 from ssme_envs.models.engine import POWER_LEVELS
+from ssme_envs.script_options import int_within, script_parser
 
 
 def _median_time(fn, repeats: int) -> float:
@@ -31,8 +31,8 @@ def _median_time(fn, repeats: int) -> float:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--repeats", type=int, default=7)
+    parser = script_parser(__doc__.splitlines()[0])
+    parser.add_argument("--repeats", type=int_within(1), default=7)
     args = parser.parse_args()
     records = {p: default_experiment(p)["identification"] for p in POWER_LEVELS}
 

@@ -15,6 +15,7 @@ from pathlib import Path
 
 from agents import parse_controller
 from ssme_envs.evaluation import evaluate
+from ssme_envs.script_options import script_parser
 
 ENV = "ssme_envs/EngineTracking-v0"
 OUT = Path(__file__).resolve().parent / "results" / "bench_evaluation.md"
@@ -51,4 +52,5 @@ def main() -> None:
 
 
 if __name__ == "__main__":
+    script_parser(__doc__.splitlines()[0]).parse_args()  # --help; any argument refused
     main()

@@ -9,19 +9,19 @@ machines, the time of 100 LU factorizations of a 200 x 200 matrix.
 
 from __future__ import annotations
 
-import argparse
 import time
 
 import numpy as np
 import scipy.linalg
 
 from ssme_envs.identification.nozzle_pipeline import run_default
+from ssme_envs.script_options import int_within, max_workers, script_parser
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--workers", type=int, default=2)
+    parser = script_parser(__doc__.splitlines()[0])
+    parser.add_argument("--repeats", type=int_within(1), default=3)
+    parser.add_argument("--workers", type=int_within(1, max_workers()), default=2)
     args = parser.parse_args()
     mat = np.random.default_rng(0).standard_normal((200, 200))
     times, refs = [], []

@@ -12,7 +12,6 @@ Prints and writes experiments/results/bench_ppo.md.
 
 from __future__ import annotations
 
-import argparse
 import os
 import time
 from pathlib import Path
@@ -24,6 +23,7 @@ from stable_baselines3.common.vec_env import VecNormalize
 
 from agents.sb3 import check_config, load_config
 from ssme_envs.envs.sb3_adapter import make_sb3_vec_env
+from ssme_envs.script_options import int_within, script_parser
 
 HERE = Path(__file__).resolve().parent
 ENVS = ("ssme_envs/EngineTracking-v0", "ssme_envs/EngineThrottle-v0", "ssme_envs/NozzleTVC-v0")
@@ -44,9 +44,9 @@ def _steps_per_s(env_id: str, steps: int, config: dict) -> float:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--steps", type=int, default=262_144)
-    parser.add_argument("--rounds", type=int, default=3)
+    parser = script_parser(__doc__.splitlines()[0])
+    parser.add_argument("--steps", type=int_within(1), default=262_144)
+    parser.add_argument("--rounds", type=int_within(1), default=3)
     args = parser.parse_args()
     config = check_config(load_config(HERE / "configs" / "ppo_engine_tracking.toml"))
     rates: dict[str, float] = {}

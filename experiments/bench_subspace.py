@@ -22,7 +22,6 @@ Timings depend on BLAS threading; on a shared machine pin it:
 
 from __future__ import annotations
 
-import argparse
 import os
 import sys
 import time
@@ -34,6 +33,7 @@ from scipy.optimize import linear_sum_assignment
 
 from ssme_envs.identification.metrics import fit_percent
 from ssme_envs.identification.subspace import InnovationsModel, dsr_e
+from ssme_envs.script_options import int_within, script_parser
 
 OUT = Path(__file__).resolve().parent / "results" / "bench_subspace.md"
 SAMPLES = 5000
@@ -152,9 +152,9 @@ def evaluate(fit: Fitted, system: Fitted, u_val: np.ndarray, y_val: np.ndarray) 
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--repeats", type=int, default=5)
-    parser.add_argument("--systems", type=int, default=4)
+    parser = script_parser(__doc__.splitlines()[0])
+    parser.add_argument("--repeats", type=int_within(1), default=5)
+    parser.add_argument("--systems", type=int_within(1), default=4)
     args = parser.parse_args()
     peer_name, fit_peer = load_peer()
     threads = os.environ.get("OPENBLAS_NUM_THREADS", "unset")

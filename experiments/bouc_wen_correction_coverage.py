@@ -12,7 +12,6 @@ corrected. Writes experiments/results/bouc_wen_correction_coverage.md.
 
 from __future__ import annotations
 
-import argparse
 import time
 from pathlib import Path
 
@@ -23,6 +22,7 @@ from ssme_envs.identification.bouc_wen import NORMALIZED_NAMES, fit_bouc_wen, re
 from ssme_envs.identification.nozzle_bench import bench_experiment, bouc_wen_acquisition_bias
 from ssme_envs.models.nozzle import published_nozzle
 from ssme_envs.outputs import write_text
+from ssme_envs.script_options import int_within, script_parser
 
 OUT = Path(__file__).resolve().parent / "results" / "bouc_wen_correction_coverage.md"
 FIRST_SEED = 1000
@@ -83,9 +83,9 @@ def main(seeds: int) -> None:
 
 
 if __name__ == "__main__":
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seeds", type=int, default=12, help="noise seeds, from 1000 (default: 12)")
+    parser = script_parser(__doc__.splitlines()[0])
+    parser.add_argument(
+        "--seeds", type=int_within(1), default=12, help="noise seeds, from 1000 (default: 12)"
+    )
     args = parser.parse_args()
-    if args.seeds < 1:
-        parser.error(f"--seeds must be at least 1, got {args.seeds}")
     main(args.seeds)

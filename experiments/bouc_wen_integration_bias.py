@@ -29,6 +29,7 @@ from ssme_envs.identification.bouc_wen_costs import NORMALIZED_NAMES
 from ssme_envs.identification.nozzle_bench import DEFAULT_SEED, NozzleRecord, bench_experiment
 from ssme_envs.models.nozzle import NozzleParameters, published_nozzle, strong_nozzle
 from ssme_envs.outputs import write_text
+from ssme_envs.script_options import script_parser
 
 OUT = Path(__file__).resolve().parent / "results" / "bouc_wen_integration_bias.md"
 COMMAND = "OMP_NUM_THREADS=1 python experiments/bouc_wen_integration_bias.py"
@@ -197,4 +198,5 @@ def main() -> None:
 
 
 if __name__ == "__main__":
+    script_parser(__doc__.splitlines()[0]).parse_args()  # --help; any argument refused
     main()

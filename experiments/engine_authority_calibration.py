@@ -23,6 +23,7 @@ from ssme_envs.identification.report import paper_table2
 from ssme_envs.models import POWER_LEVELS, NonlinearEngine, TruthConfig
 from ssme_envs.models.engine_valve_flow import AUTHORITY_LOSS, AUTHORITY_TRAVEL, valve_authority
 from ssme_envs.outputs import write_text
+from ssme_envs.script_options import script_parser
 
 SEED = 2024
 BAND = (0.01, 0.2)  # the range of Table II's SEEs against Rocketdyne's simulation
@@ -100,4 +101,5 @@ def main() -> None:
 
 
 if __name__ == "__main__":
+    script_parser(__doc__.splitlines()[0]).parse_args()  # --help; any argument refused
     main()

@@ -17,6 +17,7 @@ import numpy as np
 
 from ssme_envs.identification import identify, model_prediction, see
 from ssme_envs.models import POWER_LEVELS, TruthConfig, published_model, simulate
+from ssme_envs.script_options import script_parser
 from ssme_envs.signals import prbs, step_ramp_test_signal
 
 NOISE = (0.0, 0.01, 0.05, 0.10)
@@ -62,4 +63,5 @@ def main() -> None:
 
 
 if __name__ == "__main__":
+    script_parser(__doc__.splitlines()[0]).parse_args()  # --help; any argument refused
     main()

@@ -40,6 +40,7 @@ from ssme_envs.models import (
 from ssme_envs.models.linear import StateSpace
 from ssme_envs.models.linked import LinkedEngineModel
 from ssme_envs.outputs import save_figure, write_text
+from ssme_envs.script_options import script_parser
 from ssme_envs.signals import prbs, step_ramp_test_signal
 
 SEED = 2024
@@ -361,4 +362,5 @@ def main() -> None:
 
 
 if __name__ == "__main__":
+    script_parser(__doc__.splitlines()[0]).parse_args()  # --help; any argument refused
     main()

@@ -11,25 +11,32 @@ standard errors, delta method on the model's covariance) contains the true value
 
 from __future__ import annotations
 
-import argparse
-
 import numpy as np
 from tqdm import tqdm
 
 from ssme_envs.identification import identify
 from ssme_envs.identification.covariance import markov_standard_errors
 from ssme_envs.models import POWER_LEVELS, TruthConfig, published_model, simulate
+from ssme_envs.script_options import comma_choices, float_within, int_within, script_parser
 from ssme_envs.signals import prbs
 
 COUNT = 10
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seeds", type=int, default=200)
-    parser.add_argument("--levels", default=",".join(str(p) for p in POWER_LEVELS))
-    parser.add_argument("--noise", type=float, default=0.05)
-    parser.add_argument("--methods", default="iv", help="comma-separated: iv, ls")
+    parser = script_parser(__doc__.splitlines()[0])
+    parser.add_argument("--seeds", type=int_within(1), default=200)
+    parser.add_argument(
+        "--levels",
+        type=comma_choices([str(p) for p in POWER_LEVELS]),
+        default=",".join(str(p) for p in POWER_LEVELS),
+    )
+    parser.add_argument(
+        "--noise", type=float_within(0.0, 1.0), default=0.05, help="std, fraction of each output's spread"
+    )
+    parser.add_argument(
+        "--methods", type=comma_choices(("iv", "ls")), default="iv", help="comma-separated: iv, ls"
+    )
     args = parser.parse_args()
     u = prbs(1016, amplitude=0.01)
     print(f"{args.seeds} noise seeds, white output noise {args.noise:.0%} of each output's spread\n")

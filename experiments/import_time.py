@@ -8,7 +8,6 @@ Writes experiments/results/import_time.md.
 
 from __future__ import annotations
 
-import argparse
 import json
 import subprocess
 import sys
@@ -16,6 +15,7 @@ from pathlib import Path
 
 from ssme_envs.envs import catalogue
 from ssme_envs.outputs import write_text
+from ssme_envs.script_options import int_within, script_parser
 
 RESULTS = Path(__file__).resolve().parent / "results" / "import_time.md"
 HEAVY = ("scipy.interpolate", "scipy.signal", "scipy.linalg", "scipy.optimize", "scipy.integrate")
@@ -41,8 +41,8 @@ def measure(env_id: str, rounds: int) -> tuple[float, float, list[str]]:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--rounds", type=int, default=5)
+    parser = script_parser(__doc__.splitlines()[0])
+    parser.add_argument("--rounds", type=int_within(1), default=5)
     args = parser.parse_args()
     lines = [
         "# Import and first make",

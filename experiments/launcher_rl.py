@@ -25,6 +25,7 @@ from ssme_envs.envs.launcher_pitch import LAUNCHER_DT
 from ssme_envs.evaluation import evaluate, layout_of, scenario_names
 from ssme_envs.evaluation_result import ControllerMetrics
 from ssme_envs.outputs import write_text
+from ssme_envs.script_options import script_parser
 
 ENV_ID = "ssme_envs/LauncherPitch-v0"
 CLASSICAL = ("pid", "lqi", "robust")
@@ -144,4 +145,5 @@ def main() -> None:
 
 
 if __name__ == "__main__":
+    script_parser(__doc__.splitlines()[0]).parse_args()  # --help; any argument refused
     main()

@@ -16,7 +16,6 @@ agents/policies/<Env>-v0-residual`` (EngineTracking's quiet one from
 
 from __future__ import annotations
 
-import argparse
 import json
 from pathlib import Path
 
@@ -28,6 +27,7 @@ from ssme_envs.evaluation import evaluate, scenario_names
 from ssme_envs.outputs import write_text
 from ssme_envs.pipelines import report_plan
 from ssme_envs.report_costs import LEARNED_GOAL, best_of_each, learned_over_classical_tables
+from ssme_envs.script_options import int_within, script_parser
 
 HERE = Path(__file__).resolve().parent
 RESULTS = HERE / "results" / "learned_vs_classical.md"
@@ -85,8 +85,8 @@ def training_rows() -> list[str]:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--episodes", type=int, default=50)
+    parser = script_parser(__doc__.splitlines()[0])
+    parser.add_argument("--episodes", type=int_within(1), default=50)
     args = parser.parse_args()
     evaluations = {}
     for env_id, (specs, _) in report_plan(learned=True).items():

@@ -12,18 +12,18 @@ The test suite regenerates them and checks that the packaged files are unchanged
 
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
 from ssme_envs.identification import nozzle_pipeline
 from ssme_envs.identification.pipeline import DEFAULT_SEED, run_default
 from ssme_envs.models.nozzle import IDENTIFIED_FILES
+from ssme_envs.script_options import script_parser
 
 DATA = Path(__file__).resolve().parents[1] / "src" / "ssme_envs" / "models" / "data"
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = script_parser(__doc__.splitlines()[0])
     parser.add_argument("--only", choices=("engine", "nozzle"))
     args = parser.parse_args()
     if args.only in (None, "engine"):

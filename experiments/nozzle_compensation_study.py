@@ -11,7 +11,6 @@ experiments/results/nozzle_compensation_study.md.
 
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 from typing import Any
 
@@ -22,6 +21,7 @@ from agents.lqi import LQIServo
 from agents.plants import nozzle_joint
 from agents.tvc import HysteresisCompensated
 from ssme_envs.evaluation import evaluate
+from ssme_envs.script_options import int_within, script_parser
 
 NOZZLE = "ssme_envs/NozzleTVC-v0"
 # (reference / joint) -> the evaluation scenario that runs it
@@ -61,8 +61,8 @@ def _compensated(scale: float) -> Any:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--episodes", type=int, default=20)
+    parser = script_parser(__doc__.splitlines()[0])
+    parser.add_argument("--episodes", type=int_within(1), default=20)
     args = parser.parse_args()
     scenarios = list(SCENARIO_OF)
     factories = {

@@ -23,6 +23,7 @@ from ssme_envs.identification.nozzle_pipeline import (
 )
 from ssme_envs.identification.nozzle_report import parameter_row
 from ssme_envs.models.nozzle import NozzleParameters, published_nozzle
+from ssme_envs.script_options import script_parser
 
 OUT = Path(__file__).resolve().parent / "results" / "nozzle_identification_study.md"
 
@@ -95,4 +96,5 @@ def main() -> None:
 
 
 if __name__ == "__main__":
+    script_parser(__doc__.splitlines()[0]).parse_args()  # --help; any argument refused
     main()

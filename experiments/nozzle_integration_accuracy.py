@@ -23,6 +23,7 @@ from ssme_envs.models.nozzle import (
     recommended_substeps,
     simulate_nozzle,
 )
+from ssme_envs.script_options import script_parser
 from ssme_envs.signals import prbs
 
 OUT = Path(__file__).resolve().parent / "results" / "nozzle_integration_accuracy.md"
@@ -74,4 +75,5 @@ def main() -> None:
 
 
 if __name__ == "__main__":
+    script_parser(__doc__.splitlines()[0]).parse_args()  # --help; any argument refused
     main()

@@ -32,7 +32,6 @@ import os
 for _name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_name, "1")
 
-import argparse  # noqa: E402
 import multiprocessing  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
@@ -50,11 +49,13 @@ from ssme_envs.identification.nozzle_pipeline import (  # noqa: E402
 )
 from ssme_envs.identification.nozzle_uncertainty import (  # noqa: E402
     DEFAULT_REPLICATES,
+    MIN_REPLICATES,
     PARAMETERS,
     dsr_e_uncertainty,
 )
 from ssme_envs.identification.subspace import dsr_e, second_order_parameters  # noqa: E402
 from ssme_envs.models.nozzle import NOZZLE_DT, published_nozzle  # noqa: E402
+from ssme_envs.script_options import comma_choices, int_within, max_workers, output_file, script_parser  # noqa: E402
 
 OUT = Path(__file__).resolve().parent / "results" / "nozzle_uncertainty_coverage.md"
 Z95 = 1.959963984540054
@@ -239,17 +240,22 @@ def bouc_wen_section(seeds: int, workers: int, acquisitions: tuple[str, ...]) ->
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seeds", type=int, default=200)
-    parser.add_argument("--replicates", type=int, default=DEFAULT_REPLICATES)
-    parser.add_argument("--bouc-wen-seeds", type=int, default=12)
-    parser.add_argument("--workers", type=int, default=2)
-    parser.add_argument("--acquisitions", default="bench,ideal", help="comma-separated: bench, ideal")
-    parser.add_argument("--out", type=Path, default=OUT)
+    parser = script_parser(__doc__.splitlines()[0])
+    parser.add_argument("--seeds", type=int_within(1), default=200)
+    parser.add_argument("--replicates", type=int_within(MIN_REPLICATES), default=DEFAULT_REPLICATES)
+    parser.add_argument(
+        "--bouc-wen-seeds", type=int_within(0), default=12, help="0: no Bouc-Wen section (default: 12)"
+    )
+    parser.add_argument("--workers", type=int_within(1, max_workers()), default=2)
+    parser.add_argument(
+        "--acquisitions",
+        type=comma_choices(MEASURED),
+        default="bench,ideal",
+        help="comma-separated: bench, ideal",
+    )
+    parser.add_argument("--out", type=output_file, default=OUT)
     args = parser.parse_args()
     chosen = tuple(a.strip() for a in args.acquisitions.split(","))
-    if not chosen or any(a not in MEASURED for a in chosen):
-        parser.error(f"--acquisitions takes a comma-separated subset of {', '.join(MEASURED)}")
     start = time.perf_counter()
     lines = [
         "# Coverage of the nozzle's standard errors",

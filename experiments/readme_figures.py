@@ -7,7 +7,6 @@ experiments/results/readme_figures.md; tests/test_readme_figures.py checks the R
 
 from __future__ import annotations
 
-import argparse
 import json
 from collections.abc import Callable
 from pathlib import Path
@@ -16,6 +15,7 @@ from agents import parse_controller
 from ssme_envs.evaluation import evaluate
 from ssme_envs.evaluation_result import EvaluationResult
 from ssme_envs.outputs import write_text
+from ssme_envs.script_options import int_within, script_parser
 
 ROOT = Path(__file__).resolve().parent.parent
 OUT = ROOT / "experiments" / "results" / "readme_figures.md"
@@ -139,8 +139,8 @@ def table(results: dict[str, EvaluationResult], episodes: int) -> str:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--episodes", type=int, default=50)
+    parser = script_parser(__doc__.splitlines()[0])
+    parser.add_argument("--episodes", type=int_within(1), default=50)
     args = parser.parse_args()
     text = table(evaluations(args.episodes), args.episodes)
     write_text(OUT, text)

@@ -9,7 +9,6 @@ for NozzleTVC and LauncherPitch, and the two policies' training records).
 
 from __future__ import annotations
 
-import argparse
 import json
 import time
 from pathlib import Path
@@ -20,6 +19,7 @@ from agents.sb3 import shipped_policy
 from ssme_envs.evaluation import evaluate, make_env
 from ssme_envs.outputs import write_text
 from ssme_envs.robustness import DEFAULT_SPREAD, robustness_markdown, spread_options
+from ssme_envs.script_options import int_within, script_parser
 
 HERE = Path(__file__).resolve().parent
 PLAN = {
@@ -44,8 +44,8 @@ def _training(name: str, trained_on: str) -> str:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--plants", type=int, default=200)
+    parser = script_parser(__doc__.splitlines()[0])
+    parser.add_argument("--plants", type=int_within(1), default=200)
     args = parser.parse_args()
     start = time.perf_counter()
     lines = [

@@ -18,8 +18,6 @@ Writes experiments/results/speed_limits.md.
 
 from __future__ import annotations
 
-import argparse
-import sys
 import timeit
 from pathlib import Path
 
@@ -38,6 +36,7 @@ from ssme_envs.envs.task import FLOATS
 from ssme_envs.models import nozzle_joint
 from ssme_envs.models.nozzle import rk4_arrays, rk4_floats, rk4_parameters
 from ssme_envs.outputs import write_text
+from ssme_envs.script_options import int_within, script_parser
 
 RESULTS = Path(__file__).resolve().parent / "results" / "speed_limits.md"
 N = 4096  # the vector size of the floors
@@ -237,13 +236,12 @@ def _room(budget: float, plant: float, ours: float) -> str:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--rounds", type=int, default=5, help="best of this many rounds (default: 5)")
+    parser = script_parser(__doc__.splitlines()[0])
+    parser.add_argument(
+        "--rounds", type=int_within(1, 100), default=5, help="best of this many rounds (default: 5)"
+    )
     args = parser.parse_args()
     rounds = args.rounds
-    if not 1 <= rounds <= 100:  # no round would give min() nothing to take
-        print(f"error: --rounds must be within 1-100, got {rounds}", file=sys.stderr)
-        raise SystemExit(2)
     pendulum_run, close = bench._single_stepper("Pendulum-v1")
     pendulum = _best(pendulum_run, bench.SINGLE_ROUND_STEPS, rounds)
     close()

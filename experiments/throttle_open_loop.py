@@ -23,6 +23,7 @@ import ssme_envs  # noqa: F401
 from agents.base import columns
 from ssme_envs.models.engine import POWER_LEVELS
 from ssme_envs.models.linked import POWER_RANGE, LinkedEngineModel
+from ssme_envs.script_options import script_parser
 
 OUT = Path(__file__).resolve().parent / "results" / "throttle_open_loop.png"
 
@@ -71,4 +72,5 @@ def main() -> None:
 
 
 if __name__ == "__main__":
+    script_parser(__doc__.splitlines()[0]).parse_args()  # --help; any argument refused
     main()

@@ -21,7 +21,6 @@ policy's copy in agents/policies/ where its run is not there).
 
 from __future__ import annotations
 
-import argparse
 import json
 import shutil
 from pathlib import Path
@@ -30,6 +29,7 @@ from agents import parse_controller
 from agents.sb3 import load_config, train
 from ssme_envs.evaluation import SCENARIOS, evaluate
 from ssme_envs.outputs import write_text
+from ssme_envs.script_options import script_parser
 
 HERE = Path(__file__).resolve().parent
 SHIP = {
@@ -137,7 +137,7 @@ def main(names: list[str], evaluate_only: bool = False) -> None:
 
 
 if __name__ == "__main__":
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = script_parser(__doc__.split("\n\n")[0])
     parser.add_argument(
         "names", nargs="*", metavar="CONFIG", help=f"configs to run (default: all): {', '.join(PLANT)}"
     )
@@ -147,5 +147,5 @@ if __name__ == "__main__":
     args = parser.parse_args()
     unknown = sorted(set(args.names) - set(PLANT))
     if unknown:
-        parser.error(f"unknown config {', '.join(unknown)}; valid: {', '.join(PLANT)}")
+        parser.error(f"unknown CONFIG {', '.join(unknown)}; valid: {', '.join(PLANT)}")
     main(args.names or list(PLANT), args.evaluate_only)

@@ -11,7 +11,6 @@ identification chooses.
 
 from __future__ import annotations
 
-import argparse
 import collections
 import sys
 from pathlib import Path
@@ -22,12 +21,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from test_identification_structures import weak_mode_record
 
 from ssme_envs.identification import identify
+from ssme_envs.script_options import int_within, output_file, script_parser
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seeds", type=int, default=100)
-    parser.add_argument("--out", type=Path, default=None)
+    parser = script_parser(__doc__.splitlines()[0])
+    parser.add_argument("--seeds", type=int_within(1), default=100)
+    parser.add_argument("--out", type=output_file, default=None)
     args = parser.parse_args()
     rank_rule, chosen, margins = collections.Counter(), collections.Counter(), []
     for seed in tqdm(range(args.seeds), desc="seeds"):
