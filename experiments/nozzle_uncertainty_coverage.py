@@ -255,7 +255,7 @@ def main() -> None:
     )
     parser.add_argument("--out", type=output_file, default=OUT)
     args = parser.parse_args()
-    chosen = tuple(a.strip() for a in args.acquisitions.split(","))
+    chosen = tuple(args.acquisitions.split(","))  # comma_choices stripped the items
     start = time.perf_counter()
     lines = [
         "# Coverage of the nozzle's standard errors",
