@@ -1,4 +1,4 @@
-"""The identification pipeline on the nonlinear engine truth (issue 18, deliverables 1 and 2).
+"""The identification pipeline on the nonlinear engine truth.
 
 For each Table I level: the Markov parameters of the truth's finite-difference linearization
 against Table I's; the pipeline's embedded experiment (8 periods of 127-bit PRBS at +-0.01,

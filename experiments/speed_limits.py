@@ -41,7 +41,7 @@ from ssme_envs.script_options import int_within, script_parser
 RESULTS = Path(__file__).resolve().parent / "results" / "speed_limits.md"
 N = 4096  # the vector size of the floors
 JOINT_ENVS = ("ssme_envs/NozzleTVC-v0", "ssme_envs/LauncherPitch-v0")  # the envs with a nozzle joint
-# the issue's floors: single over Pendulum-v1, native vector (N = 4096) over CartPole-v1's
+# the target floors: single over Pendulum-v1, native vector (N = 4096) over CartPole-v1's
 FLOORS = {
     "ssme_envs/EngineTracking-v0": {"single": 1.5, "vector": 1.0},
     "ssme_envs/EngineThrottle-v0": {"single": 1.5, "vector": 1.0},
@@ -294,7 +294,7 @@ def main() -> None:
         "Beside them, today's ratio of the env (`ssme-envs bench`'s measurement) and the time per "
         "step the floor leaves beside those costs, with what the rest takes today.",
         "",
-        "| env | mode | actions | issue floor | restarts per step | bound | today: the env | "
+        "| env | mode | actions | target floor | restarts per step | bound | today: the env | "
         "room beside the named costs at the floor (the rest today) |",
         "|---|---|---|---|---|---|---|---|",
     ]
@@ -364,7 +364,7 @@ def main() -> None:
 
 
 def plant_floor_line(vectors: dict[str, tuple[float, float]], rounds: int) -> list[str]:
-    """The section on the issue's line "each vector step within 2x of its plant-arithmetic
+    """The section on the target "each vector step within 2x of its plant-arithmetic
     floor": what the step's sensor noise takes of the room that 2x leaves beside the plant."""
     lines = [
         "## Within 2x of the plant floor: the sensor noise in the room",

@@ -1,4 +1,4 @@
-"""The nonlinear engine truth (issue 18): its linearization, its asymmetric gains, its runs.
+"""The nonlinear engine truth: its linearization, its asymmetric gains, its runs.
 
 Expected values come from Table I (``published_model``) or from computations written out here
 (finite differences, eq 36 branch by branch), never from the code under test.

@@ -144,6 +144,19 @@ def test_every_script_refuses_arguments_it_does_not_take() -> None:
     assert run.stderr == "error: unrecognized arguments: --bogus\n"
 
 
+def test_coverage_script_reports_seeds_without_a_model_to_count() -> None:
+    """engine_uncertainty_coverage.py on data the identifier refuses (noise as large as the
+    outputs' spread) and on data where least squares misses the true indices: a row each, with
+    the count and no coverage, where the script raised a traceback."""
+    runs = [
+        _run("engine_uncertainty_coverage", ("--noise", noise, "--seeds", "1", "--levels", "70", "--methods", m))
+        for noise, m in (("1.0", "iv"), ("0.3", "ls"))
+    ]
+    assert [r.returncode for r in runs] == [0, 0], [r.stderr[-500:] for r in runs]
+    assert "| 70 | iv | 0/1 (1 refused) | - | - |" in runs[0].stdout.splitlines()
+    assert "| 70 | ls | 0/1 | - | - |" in runs[1].stdout.splitlines()
+
+
 # ------------------------------------------------------------------ the helpers, in this process
 
 

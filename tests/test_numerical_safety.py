@@ -1,4 +1,4 @@
-"""Numerical safety of the nozzle-driven envs (issue 16).
+"""Numerical safety of the nozzle-driven envs.
 
 The substep rule bounds every rate that limits RK4's stability (stiffness, damping, Bouc-Wen
 hysteresis), plants that need more than MAX_SUBSTEPS are refused at construction, the loader
@@ -195,7 +195,7 @@ def test_launcher_envs_stay_finite_or_refuse_the_plant(plant, mode):
 
 @pytest.mark.parametrize("env_id", [NOZZLE, LAUNCHER])
 @pytest.mark.parametrize("row", ["linear", "bouc_wen"])
-def test_the_issue_example_is_refused_naming_the_damping_rate(env_id, row):
+def test_a_stiff_joint_is_refused_naming_the_damping_rate(env_id, row):
     """J = 1e-6 with Table 1's b and k: b/J = 4e8 1/s, which no RK4 step under 10,000 per sample
     keeps stable (the env used to return NaN forever)."""
     plant = NozzleParameters(**{**published_nozzle(row).to_dict(), "J": 1e-6})

@@ -1,4 +1,4 @@
-"""The identification pipeline on the nonlinear engine truth (issue 18).
+"""The identification pipeline on the nonlinear engine truth.
 
 :func:`nonlinear_experiment` runs the embedded experiment of
 :func:`~ssme_envs.identification.pipeline.default_experiment` (the same PRBS design and noise
