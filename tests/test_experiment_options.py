@@ -149,8 +149,11 @@ def test_coverage_script_reports_seeds_without_a_model_to_count() -> None:
     outputs' spread) and on data where least squares misses the true indices: a row each, with
     the count and no coverage, where the script raised a traceback."""
     runs = [
-        _run("engine_uncertainty_coverage", ("--noise", noise, "--seeds", "1", "--levels", "70", "--methods", m))
-        for noise, m in (("1.0", "iv"), ("0.3", "ls"))
+        _run(
+            "engine_uncertainty_coverage",
+            ("--noise", noise, "--seeds", "1", "--levels", "70", "--methods", how),
+        )
+        for noise, how in (("1.0", "iv"), ("0.3", "ls"))
     ]
     assert [r.returncode for r in runs] == [0, 0], [r.stderr[-500:] for r in runs]
     assert "| 70 | iv | 0/1 (1 refused) | - | - |" in runs[0].stdout.splitlines()
