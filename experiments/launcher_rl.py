@@ -6,11 +6,11 @@ zero,pid,lqi,robust,ppo,ppo:residual --episodes 20`` (seed 0) measures them.
     python experiments/launcher_rl.py
 
 Reads agents/policies/LauncherPitch-v0/ (config.toml, training.json and the policy) and
-agents/policies/LauncherPitch-v0-residual/ (the policy and its base), and the
-SAC and TD3 runs tried beside it where experiments/runs/<config name>/ holds them (``ssme-envs
-train --config experiments/configs/sac_launcher_pitch.toml --out
-experiments/runs/sac_launcher_pitch``, not shipped), and writes its section, "## LauncherPitch-v0",
-at the end of experiments/results/rl_training.md (replacing an earlier one).
+agents/policies/LauncherPitch-v0-residual/ (the policy and its base), and the SAC and TD3 runs
+tried beside it where experiments/runs/<config name>/ holds them (``ssme-envs train --config
+experiments/configs/sac_launcher_pitch.toml --out experiments/runs/sac_launcher_pitch``, not
+shipped; the section names those it left out), and writes its section, "## LauncherPitch-v0", at
+the end of experiments/results/rl_training.md (replacing an earlier one).
 experiments/train_policies.py rewrites that file without it: run this after.
 """
 
@@ -18,6 +18,8 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+
+from tried_runs import missing_note, missing_runs, tried_runs
 
 from agents import parse_controller
 from agents.sb3 import shipped_policy
@@ -36,7 +38,6 @@ SEED = 0
 TITLE = "## LauncherPitch-v0"
 HERE = Path(__file__).resolve().parent
 RESULTS = HERE / "results" / "rl_training.md"
-TRIED = ("sac_launcher_pitch", "td3_launcher_pitch")  # configs in experiments/configs
 
 
 def split(metrics: ControllerMetrics) -> str:
@@ -54,12 +55,9 @@ def section() -> str:
     config = (policy / "config.toml").read_text().strip()
     factories = {name: parse_controller(name, ENV_ID) for name in CONTROLLERS}
     tried = {}  # algo -> its run's training summary
-    for name in TRIED:
-        run = HERE / "runs" / name
-        if (run / "training.json").exists():
-            summary = json.loads((run / "training.json").read_text())
-            tried[summary["algo"]] = summary
-            factories[summary["algo"]] = parse_controller(f"{summary['algo']}:{run}", ENV_ID)
+    for algo, run in tried_runs(ENV_ID).items():
+        tried[algo] = json.loads((run / "training.json").read_text())
+        factories[algo] = parse_controller(f"{algo}:{run}", ENV_ID)
     columns = (*CONTROLLERS, *tried)
     result = evaluate(ENV_ID, factories, scenario_names(ENV_ID), EPISODES, SEED)
     # rows without a leading pipe: train_policies.py keeps the "| " rows of its own table
@@ -120,6 +118,8 @@ def section() -> str:
             for algo, s in tried.items()
         )
         lines += ["", f"Tried beside PPO, not shipped (their runs in experiments/runs/): {runs}."]
+    missing = missing_note(missing_runs(ENV_ID))
+    lines += ["", *missing[:-1]] if missing else []
     lines += [
         "",
         "Where PPO falls short, the error + rate split says why: on the attitude commands (random steps "

@@ -20,6 +20,7 @@ import json
 from pathlib import Path
 
 import tomllib
+from tried_runs import CONFIG_STEMS, REMAKE, TRIED, missing_note, missing_runs, tried_runs
 
 from agents import parse_controller
 from agents.shipped import shipped_specs
@@ -27,42 +28,11 @@ from ssme_envs.evaluation import evaluate, scenario_names
 from ssme_envs.outputs import write_text
 from ssme_envs.pipelines import report_plan
 from ssme_envs.report_costs import LEARNED_GOAL, best_of_each, learned_over_classical_tables
-from ssme_envs.script_options import int_within, script_parser
+from ssme_envs.script_options import episodes_within_memory, script_parser
 
 HERE = Path(__file__).resolve().parent
 RESULTS = HERE / "results" / "learned_vs_classical.md"
 SEED = 0
-# runs tried beside the shipped policies, not shipped: name in the tables -> experiments/runs/ folder
-# pattern (the off-policy algorithms, and NozzleTVC's residual trained with residual_penalty = 1.0)
-TRIED = {"sac": "sac_{}", "td3": "td3_{}", "ppo:penalty": "ppo_{}_residual_penalty"}
-# each env's stem in the names of experiments/configs/*.toml
-CONFIG_STEMS = {
-    "ssme_envs/EngineTracking-v0": "engine_tracking",
-    "ssme_envs/EngineThrottle-v0": "engine_throttle",
-    "ssme_envs/NozzleTVC-v0": "nozzle_tvc",
-    "ssme_envs/LauncherPitch-v0": "launcher_pitch",
-}
-
-
-def _tried_folders(env_id: str) -> dict[str, Path]:
-    return {name: HERE / "runs" / folder.format(CONFIG_STEMS[env_id]) for name, folder in TRIED.items()}
-
-
-def tried_runs(env_id: str) -> dict[str, Path]:
-    """``{name: run directory}`` of the tried runs of an env found under experiments/runs/ (e.g.
-    ``ssme-envs train --config experiments/configs/sac_nozzle_tvc.toml --out
-    experiments/runs/sac_nozzle_tvc``)."""
-    return {name: run for name, run in _tried_folders(env_id).items() if (run / "training.json").exists()}
-
-
-def missing_runs(env_id: str) -> list[Path]:
-    """The tried runs of an env that have a config but no run under experiments/runs/ (runs/ is
-    not shipped: a fresh clone has none, and their columns then drop out of the tables)."""
-    return [
-        run
-        for run in _tried_folders(env_id).values()
-        if (HERE / "configs" / f"{run.name}.toml").exists() and not (run / "training.json").exists()
-    ]
 
 
 def training_rows() -> list[str]:
@@ -84,18 +54,31 @@ def training_rows() -> list[str]:
     return rows
 
 
+def controller_specs() -> dict[str, dict[str, str]]:
+    """``{env id: {name in the tables: controller spec}}``: the report's classical controllers,
+    the shipped policies and the tried runs found."""
+    plan = {}
+    for env_id, (specs, _) in report_plan(learned=True).items():
+        names = [s for s in specs if not s.startswith("ppo")] + list(shipped_specs(env_id))
+        plan[env_id] = {name: name for name in names}
+        plan[env_id].update({name: f"{name.split(':')[0]}:{run}" for name, run in tried_runs(env_id).items()})
+    return plan
+
+
+def plan() -> dict[str, int]:
+    """``{env id: scenario-controller pairs}`` of the run, for the memory check of --episodes."""
+    return {env_id: len(specs) * len(scenario_names(env_id)) for env_id, specs in controller_specs().items()}
+
+
 def main() -> None:
     parser = script_parser(__doc__.splitlines()[0])
-    parser.add_argument("--episodes", type=int_within(1), default=50)
+    parser.add_argument("--episodes", type=episodes_within_memory(plan), default=50)
     args = parser.parse_args()
     evaluations = {}
-    for env_id, (specs, _) in report_plan(learned=True).items():
+    for env_id, specs in controller_specs().items():
         scenarios = scenario_names(env_id)
-        names = [s for s in specs if not s.startswith("ppo")] + list(shipped_specs(env_id))
-        factories = {name: parse_controller(name, env_id) for name in names}
-        for name, run in tried_runs(env_id).items():
-            factories[name] = parse_controller(f"{name.split(':')[0]}:{run}", env_id)
-            names.append(name)
+        factories = {name: parse_controller(spec, env_id) for name, spec in specs.items()}
+        names = list(specs)
         print(f"{env_id}: {', '.join(names)} on {', '.join(scenarios)}", flush=True)
         evaluations[env_id] = evaluate(env_id, factories, scenarios, args.episodes, SEED)
     bests = {env_id: best_of_each(r, tuple(TRIED)) for env_id, r in evaluations.items()}
@@ -133,8 +116,7 @@ def main() -> None:
     if tried:
         lines += [
             "Tried, not shipped (configs in experiments/configs/; the runs, in experiments/runs/, are not "
-            "in the repository: `ssme-envs train --config experiments/configs/NAME.toml --out "
-            "experiments/runs/NAME` remakes one):",
+            f"in the repository: `{REMAKE}` remakes one):",
             "",
         ]
         for env_id, algo, run in tried:
@@ -144,16 +126,7 @@ def main() -> None:
                 f"{summary['seconds']:.0f} s, the policy of {summary['kept']['steps']:,} steps kept"
             )
         lines.append("")
-    missing = [run for e in evaluations for run in missing_runs(e)]
-    if missing:
-        names = ", ".join(run.name for run in missing)
-        print(f"note: tried runs not in experiments/runs/, left out of the tables: {names}", flush=True)
-        lines += [
-            f"Tried runs not found under experiments/runs/ when this file was written, so not in its "
-            f"tables: {names} (train each with `ssme-envs train --config experiments/configs/NAME.toml "
-            "--out experiments/runs/NAME`).",
-            "",
-        ]
+    lines += missing_note([run for e in evaluations for run in missing_runs(e)])
     write_text(RESULTS, "\n".join(lines))
     print(f"wrote {RESULTS}")
 

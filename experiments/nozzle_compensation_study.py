@@ -21,7 +21,7 @@ from agents.lqi import LQIServo
 from agents.plants import nozzle_joint
 from agents.tvc import HysteresisCompensated
 from ssme_envs.evaluation import evaluate
-from ssme_envs.script_options import int_within, script_parser
+from ssme_envs.script_options import episodes_within_memory, script_parser
 
 NOZZLE = "ssme_envs/NozzleTVC-v0"
 # (reference / joint) -> the evaluation scenario that runs it
@@ -60,18 +60,24 @@ def _compensated(scale: float) -> Any:
     return factory
 
 
+FACTORIES = {
+    "lqi": LQIServo,
+    "lqi + compensation": _compensated(1.0),
+    "lqi + 2x compensation": _compensated(2.0),
+    "lqi + b r' feedforward": RateFeedforward,
+}
+
+
 def main() -> None:
     parser = script_parser(__doc__.splitlines()[0])
-    parser.add_argument("--episodes", type=int_within(1), default=20)
+    parser.add_argument(
+        "--episodes",
+        type=episodes_within_memory(lambda: {NOZZLE: len(FACTORIES) * len(SCENARIO_OF)}),
+        default=20,
+    )
     args = parser.parse_args()
     scenarios = list(SCENARIO_OF)
-    factories = {
-        "lqi": LQIServo,
-        "lqi + compensation": _compensated(1.0),
-        "lqi + 2x compensation": _compensated(2.0),
-        "lqi + b r' feedforward": RateFeedforward,
-    }
-    results = evaluate(NOZZLE, factories, list(SCENARIO_OF.values()), episodes=args.episodes)
+    results = evaluate(NOZZLE, FACTORIES, list(SCENARIO_OF.values()), episodes=args.episodes)
     results = {label: results[SCENARIO_OF[label]] for label in scenarios}
     lines = [
         "# Nozzle hysteresis compensation on the Bouc-Wen and the linear joint",
@@ -80,13 +86,13 @@ def main() -> None:
         "IAE (deg s) on NozzleTVC, mean over the episodes (the harness's seeds), change against the LQ "
         "servo alone in brackets.",
         "",
-        "| reference / joint | " + " | ".join(factories) + " |",
-        "|---|" + "---|" * len(factories),
+        "| reference / joint | " + " | ".join(FACTORIES) + " |",
+        "|---|" + "---|" * len(FACTORIES),
     ]
     for scenario in scenarios:
         base = results[scenario]["lqi"]["outputs"]["angle"]["iae"]
         cells = []
-        for name in factories:
+        for name in FACTORIES:
             iae = results[scenario][name]["outputs"]["angle"]["iae"]
             cells.append(f"{iae:.4f}" + ("" if name == "lqi" else f" ({100 * (iae / base - 1):+.1f} %)"))
         lines.append(f"| {scenario} | " + " | ".join(cells) + " |")

@@ -15,7 +15,7 @@ from agents import parse_controller
 from ssme_envs.evaluation import evaluate
 from ssme_envs.evaluation_result import EvaluationResult
 from ssme_envs.outputs import write_text
-from ssme_envs.script_options import int_within, script_parser
+from ssme_envs.script_options import episodes_within_memory, script_parser
 
 ROOT = Path(__file__).resolve().parent.parent
 OUT = ROOT / "experiments" / "results" / "readme_figures.md"
@@ -140,7 +140,8 @@ def table(results: dict[str, EvaluationResult], episodes: int) -> str:
 
 def main() -> None:
     parser = script_parser(__doc__.splitlines()[0])
-    parser.add_argument("--episodes", type=int_within(1), default=50)
+    pairs = {env_id: len(names) * len(scenarios) for env_id, (names, scenarios) in RUNS.items()}
+    parser.add_argument("--episodes", type=episodes_within_memory(lambda: pairs), default=50)
     args = parser.parse_args()
     text = table(evaluations(args.episodes), args.episodes)
     write_text(OUT, text)

@@ -17,7 +17,15 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from ssme_envs.script_options import comma_choices, float_within, int_within, output_file, script_parser
+from ssme_envs.cli_checks import check_episodes
+from ssme_envs.script_options import (
+    comma_choices,
+    episodes_within_memory,
+    float_within,
+    int_within,
+    output_file,
+    script_parser,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 Case = tuple[str, tuple[str, ...], str]  # script, arguments, the option the error names
@@ -41,9 +49,15 @@ CASES: dict[str, list[tuple[tuple[str, ...], str]]] = {
         (("--noise", "nan"), "--noise"),
     ],
     "import_time": [(("--rounds", "0"), "--rounds"), (("--rounds", "x"), "--rounds"), (BOGUS, "--bogus")],
-    "learned_vs_classical": [(("--episodes", "0"), "--episodes")],
+    "learned_vs_classical": [
+        (("--episodes", "0"), "--episodes"),
+        (("--episodes", "1000000000000000"), "--episodes"),
+    ],
     "make_design_models": [(("--only", "foo"), "--only")],
-    "nozzle_compensation_study": [(("--episodes", "-1"), "--episodes")],
+    "nozzle_compensation_study": [
+        (("--episodes", "-1"), "--episodes"),
+        (("--episodes", "1000000000000000"), "--episodes"),
+    ],
     "nozzle_uncertainty_coverage": [
         (("--seeds", "0"), "--seeds"),
         (("--replicates", "9"), "--replicates"),
@@ -54,7 +68,10 @@ CASES: dict[str, list[tuple[tuple[str, ...], str]]] = {
         (("--out", "{file}"), "--out"),
         (("--out", "{dir}"), "--out"),
     ],
-    "readme_figures": [(("--episodes", "0"), "--episodes")],
+    "readme_figures": [
+        (("--episodes", "0"), "--episodes"),
+        (("--episodes", "1000000000000000"), "--episodes"),
+    ],
     "robustness_study": [(("--plants", "0"), "--plants")],
     "speed_limits": [
         (("--rounds", "0"), "--rounds"),
@@ -273,3 +290,19 @@ def test_output_file(tmp_path: Path) -> None:
     ]:
         with pytest.raises(argparse.ArgumentTypeError, match=why):
             output_file(str(bad))
+
+
+def test_episodes_within_memory_holds_to_the_evaluate_commands_check() -> None:
+    """The scripts' --episodes and ``ssme-envs evaluate --episodes`` refuse the same counts with
+    the same message: a count the command's check refuses, and one it takes."""
+    plan = {"ssme_envs/NozzleTVC-v0": 6}
+    convert = episodes_within_memory(lambda: plan)
+    assert convert("3") == 3
+    with pytest.raises(ValueError) as refused:
+        check_episodes(10**15, plan)
+    with pytest.raises(argparse.ArgumentTypeError) as given_text:
+        convert(str(10**15))
+    assert str(given_text.value) == str(refused.value)
+    assert str(refused.value).startswith(f"--episodes {10**15} needs about ")
+    with pytest.raises(argparse.ArgumentTypeError, match="must be at least 1, got 0"):
+        convert("0")

@@ -1,7 +1,7 @@
 """Options of the scripts in experiments/, held to the command line's rule: a bad option is one
 ``error: ...`` line on stderr and exit code 2, before any work (:func:`script_parser` and the
-``type=`` factories :func:`int_within`, :func:`float_within`, :func:`comma_choices` and
-:func:`output_file`)."""
+``type=`` factories :func:`int_within`, :func:`float_within`, :func:`comma_choices`,
+:func:`output_file` and :func:`episodes_within_memory`)."""
 
 from __future__ import annotations
 
@@ -9,18 +9,21 @@ import argparse
 import math
 import os
 import sys
-from collections.abc import Callable, Collection
+from collections.abc import Callable, Collection, Mapping
 from pathlib import Path
 from typing import NoReturn
 
-from ssme_envs.cli_checks import one_line
+from ssme_envs.cli_checks import check_episodes, one_line
 
 
 class _ScriptParser(argparse.ArgumentParser):
     def error(self, message: str) -> NoReturn:
         if message.startswith("argument "):  # "argument --rounds: must be ..." -> "--rounds must be ..."
             option, _, text = message.removeprefix("argument ").partition(": ")
-            message = f"{option} {text}" if text.startswith("must ") else f"{option}: {text}"
+            if text.startswith(f"{option} "):  # the check's own message names the option
+                message = text
+            else:
+                message = f"{option} {text}" if text.startswith("must ") else f"{option}: {text}"
         print(f"error: {one_line(message)}", file=sys.stderr)
         raise SystemExit(2)
 
@@ -159,10 +162,47 @@ def output_file(text: str) -> Path:
     return path
 
 
+def episodes_within_memory(plan: Callable[[], Mapping[str, int]]) -> Callable[[str], int]:
+    """An argparse ``type=`` for ``--episodes`` of an evaluation, held to the memory check of
+    ``ssme-envs evaluate --episodes`` (:func:`~ssme_envs.cli_checks.check_episodes`).
+
+    Parameters
+    ----------
+    plan : callable
+        () -> ``{env id: scenario-controller pairs evaluated}``, called on a value given.
+
+    Returns
+    -------
+    callable
+        Text -> int (at least 1); it raises ``argparse.ArgumentTypeError`` for other text and
+        for a count whose rollouts would not fit in memory (the message gives the largest that
+        does).
+    """
+    count = int_within(1)
+
+    def convert(text: str) -> int:
+        episodes = count(text)
+        try:
+            check_episodes(episodes, dict(plan()))
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+        return episodes
+
+    return convert
+
+
 def max_workers() -> int:
     """The largest ``--workers`` (processes) a script takes: this machine's CPU count, at least 2
     (the scripts' default)."""
     return max(2, os.cpu_count() or 1)
 
 
-__all__ = ["comma_choices", "float_within", "int_within", "max_workers", "output_file", "script_parser"]
+__all__ = [
+    "comma_choices",
+    "episodes_within_memory",
+    "float_within",
+    "int_within",
+    "max_workers",
+    "output_file",
+    "script_parser",
+]
