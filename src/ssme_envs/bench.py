@@ -202,7 +202,7 @@ def kernels_used() -> str:
     from ssme_envs.models import engine_step, nozzle_joint
 
     ran = {"compiled": "compiled kernel", "python": "Python reference"}
-    batch = "compiled kernel" if engine_step.has_batch(engine_step._KERNEL) else "numpy reference"
+    batch = "compiled kernel" if engine_step.has_batch(engine_step.kernel()) else "numpy reference"
     draws = {"compiled": "compiled kernel", "python": "numpy generators (whole episodes)"}
     streams = {"compiled": "compiled cursors", "python": "numpy reference (from whole episodes)"}
     scoring = {"compiled": "compiled kernel", "python": "numpy reference"}

@@ -56,7 +56,7 @@ class BatchArgs:
 def batch_args(task: EngineTask, table: bytes, width: int, scheduled: bool) -> BatchArgs | None:
     """The task's :class:`BatchArgs`, or None where the batch step stays numpy's: no kernel
     built (or one without the batch forms), or the nonlinear engine as the plant."""
-    if not engine_step.has_batch(engine_step._KERNEL) or task.nonlinear is not None:
+    if not engine_step.has_batch(engine_step.kernel()) or task.nonlinear is not None:
         return None
     return BatchArgs(task, table, width, scheduled)
 
@@ -65,7 +65,7 @@ def compiled_args(task: EngineTask) -> tuple[tuple | None, BatchArgs | None]:
     """The task's compiled steps' arguments from its ``kernel_steps()``, (None, None) without the
     kernel: the float step's after the commands and nominal valves (half the backlash, stiction,
     ``pair_table``'s table and width), and :func:`batch_args`."""
-    if engine_step._KERNEL is None:
+    if engine_step.kernel() is None:
         return None, None
     steps, scheduled = task.kernel_steps()
     table = engine_step.pair_table(steps)
@@ -77,7 +77,7 @@ def plant_step(task: EngineTask, plant: EnginePlant, command: np.ndarray, t: np.
     (the arrays of ``plant``, returned)."""
     args: BatchArgs = task.batch_args
     command = np.ascontiguousarray(command)
-    engine_step._KERNEL.plant_batch(*plant, command, t, args.config, args.table, args.offsets)
+    engine_step.kernel().plant_batch(*plant, command, t, args.config, args.table, args.offsets)
     return plant
 
 
@@ -93,7 +93,7 @@ def task_step(
     args: BatchArgs = task.batch_args
     values = np.empty((10, n), dtype=np.float32)
     reward, terminated = np.empty(n), np.empty(n, dtype=bool)
-    engine_step._KERNEL.task_batch(
+    engine_step.kernel().task_batch(
         *plant, *integral, held, *prev, action, t, ref[0], ref[1], noise[0], noise[1], values, reward,
         terminated, args.config, args.table, args.offsets,
     )  # fmt: skip

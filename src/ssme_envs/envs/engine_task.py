@@ -300,7 +300,7 @@ class EngineTask:
             return plant, plant.x[-2], plant.x[-1]
         x, linkage, valve = plant
         if self.kernel_args is not None:  # the reference's operations, compiled
-            kernel = engine_step._KERNEL
+            kernel = engine_step.kernel()
             x, linkage, valve = kernel.pair_step(x, linkage, valve, *command, 0.0, 0.0, *self.kernel_args, 0)
         else:  # gains about zero: |v - 0| is |v|, bit for bit
             pairs, g0, g1, half, stick = self.rows

@@ -210,7 +210,7 @@ class ThrottleTask(EngineTask):
             x = dynamics_arrays(x, u_star, shift, k, b)
             x += offset  # in place: the same sum, without a third (n, N) array
         elif self.kernel_args is not None:  # the reference's operations, compiled
-            x, linkage, valve = engine_step._KERNEL.pair_step(
+            x, linkage, valve = engine_step.kernel().pair_step(
                 x, linkage, valve, *command, *nominal, *self.kernel_args, t - 1
             )
         else:

@@ -59,7 +59,7 @@ def compiled_servo(batched: bool) -> Any:
     """The compiled kernel, where it runs, gives :func:`servo_floats`' bits (checked once) and
     the nozzle task integrates with the package's own RK4: the kernel's servo is that loop with
     that RK4 inside (a substituted integrator, as a test's, gets the Python loop); else None."""
-    kernel = nozzle_joint._KERNEL
+    kernel = nozzle_joint.kernel()
     if kernel is None or not _kernel_agrees():
         return None
     own = (
@@ -89,7 +89,7 @@ def _kernel_agrees() -> bool:
     """Whether the kernel's servo gives the reference's bits on a check set (a strong joint
     through a saturating torque and a fault's gain, one launcher and a batch, whose joint is
     shared and per launcher); a warning if not."""
-    kernel = nozzle_joint._KERNEL
+    kernel = nozzle_joint.kernel()
     joint = nozzle_joint.rk4_parameters(nozzle_joint.strong_nozzle().normalized())
     per_nozzle = joint._replace(
         **{name: np.full(2, value) for name, value in joint._asdict().items() if name != "hysteretic"}

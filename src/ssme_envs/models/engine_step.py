@@ -338,3 +338,9 @@ def _same_bits(a: Any, b: Any) -> bool:
 
 _KERNEL = load_kernel("_engine_kernel", _kernel_agrees, "engine")  # the module, or None: the reference
 KERNEL = "python" if _KERNEL is None else "compiled"  # which arithmetic the tasks' float step runs
+
+
+def kernel() -> Any:
+    """The compiled kernel module the package runs, None where it runs the Python reference
+    (not built, turned off by ``SSME_ENVS_NO_KERNEL``, or not giving the reference's bits)."""
+    return _KERNEL

@@ -335,6 +335,14 @@ def _load_kernel() -> Any:
 
 _KERNEL = _load_kernel()
 KERNEL = "python" if _KERNEL is None else "compiled"  # which arithmetic rk4_floats and rk4_arrays run
+
+
+def kernel() -> Any:
+    """The compiled kernel module the package runs, None where it runs the Python reference
+    (not built, turned off by ``SSME_ENVS_NO_KERNEL``, or not giving the reference's bits)."""
+    return _KERNEL
+
+
 # One nozzle's RK4: (x, v, w, tau, h, steps, p) -> (x, v, w), as _rk4_floats_py (a C function
 # where the kernel is used: no Python frame per call).
 rk4_floats: Callable[..., tuple[float, float, float]] = (
@@ -368,6 +376,7 @@ __all__ = [
     "NOZZLE_DT",
     "NozzleParameters",
     "RK4Parameters",
+    "kernel",
     "published_nozzle",
     "rk4_arrays",
     "rk4_floats",
