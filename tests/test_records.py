@@ -4,14 +4,18 @@ stamps, columns left unread, sample times over a day, special and oversized file
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import re
 import subprocess
 import sys
 from pathlib import Path
 
+import gymnasium as gym
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from ssme_envs.cli import main
 from ssme_envs.identification.records import (
@@ -316,6 +320,68 @@ def test_sample_time_over_a_day_is_refused(tmp_path):
     slow = _timed(tmp_path / "slow.csv", 1e6 * np.arange(SAMPLES))
     with pytest.raises(ValueError, match=r"slow\.csv: sample time 1e\+06 s is over a day"):
         read_columns(slow, COLUMNS)
+
+
+def test_sample_time_under_a_nanosecond_is_refused(tmp_path):
+    no_t = _write(
+        tmp_path / "no_t.csv", ",".join(COLUMNS), [",".join(repr(float(v)) for v in r) for r in _good()]
+    )
+    assert read_columns(no_t, COLUMNS, dt=1e-9)[1] == 1e-9
+    with pytest.raises(
+        ValueError, match=r"no_t\.csv: sample time 1e-300 s is under a nanosecond \(1e-09 s\)"
+    ):
+        read_columns(no_t, COLUMNS, dt=1e-300)
+    fast = _timed(tmp_path / "fast.csv", 1e-12 * np.arange(SAMPLES))
+    with pytest.raises(ValueError, match=r"fast\.csv: sample time 1e-12 s is under a nanosecond"):
+        read_columns(fast, COLUMNS)
+
+
+# --- the sample time of a time column ---------------------------------------------------------------
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    digits=st.integers(1, 999),
+    exponent=st.integers(1, 6),
+    rows=st.integers(2, 3000),
+    written=st.sampled_from(["product", "fixed", "sum"]),
+)
+def test_a_decimal_step_reads_as_that_decimal(tmp_path_factory, digits, exponent, rows, written):
+    """Stamps of a record taken every 0.04 s, however they were written (i * dt, fixed decimals or
+    a running sum), give 0.04 s: the value a plant of the envs is then equal to."""
+    dt = float(f"{digits}e-{exponent}")
+    if dt < 1e-6 and written == "sum":  # a running sum of a tiny step drifts off uniform
+        written = "product"
+    k = np.arange(rows)
+    if written == "product":
+        cells = [repr(float(v)) for v in k * dt]
+    elif written == "fixed":
+        cells = [f"{v:.{exponent + 4}f}" for v in k * dt]
+    else:
+        cells = [repr(float(v)) for v in np.cumsum(np.r_[0.0, np.full(rows - 1, dt)])]
+    path = _write(
+        tmp_path_factory.mktemp("t") / "r.csv", "t,u,y", [f"{c},0.5,{i % 7}" for i, c in enumerate(cells)]
+    )
+    assert read_columns(path, ("u", "y"))[1] == dt
+
+
+@pytest.mark.parametrize("dt", [1 / 30, 1 / 3000, 2 / 7])
+def test_a_step_that_is_no_short_decimal_keeps_its_value(tmp_path, dt):
+    path = _timed(tmp_path / "thirds.csv", dt * np.arange(SAMPLES))
+    got = read_columns(path, COLUMNS)[1]
+    assert got == pytest.approx(dt, rel=1e-10)
+    assert read_columns(path, COLUMNS, dt=dt)[1] == got
+
+
+def test_a_plant_read_from_stamps_takes_the_design_model_of_its_sample_time():
+    """A plant whose dt carries a stamp's last bits (0.04 + 3.6e-17 s) is designed on as one of
+    0.04 s; one of another sample time is refused with both times shown."""
+    model = identified_model(100)
+    near = gym.make("ssme_envs/EngineTracking-v0", plant=dataclasses.replace(model, dt=0.040000000000000036))
+    assert near.unwrapped.task.design_model("identified").dt == DT
+    other = gym.make("ssme_envs/EngineTracking-v0", plant=dataclasses.replace(model, dt=0.0400001))
+    with pytest.raises(ValueError, match=r"design model has dt 0\.04 s but the env's plant 0\.0400001 s"):
+        other.unwrapped.task.design_model("identified")
 
 
 # --- files that are not regular files, or too large -----------------------------------------------

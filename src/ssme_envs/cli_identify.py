@@ -42,14 +42,17 @@ def noting_replacement(out: Path) -> Iterator[None]:
 
 
 def check_dt_option(value: float | None) -> None:
-    """``--dt``: a positive number of seconds, at most a day (:data:`MAX_DT`)."""
-    from ssme_envs.identification.records import MAX_DT
+    """``--dt``: a positive number of seconds, from a nanosecond to a day (:data:`MIN_DT`,
+    :data:`MAX_DT`)."""
+    from ssme_envs.identification.records import MAX_DT, MIN_DT
 
     check_finite("--dt", value, positive=True)
     if value is not None and value > MAX_DT:
         raise ValueError(
             f"--dt must be at most {MAX_DT:g} s (a day): a slower record holds no dynamics, got {value:g}"
         )
+    if value is not None and value < MIN_DT:
+        raise ValueError(f"--dt must be at least {MIN_DT:g} s (a nanosecond), got {value:g}")
 
 
 def _needs_data(args: argparse.Namespace, flags: tuple[str, ...], embedded: str) -> None:

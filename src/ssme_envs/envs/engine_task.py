@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -213,9 +214,10 @@ class EngineTask:
         if source == "truth" and self.own_plant is not None:
             return self.own_plant
         model = design_model(self.operating_power, source)
-        if model.dt != self.dt:  # a design at another sample time would act at the wrong rate
+        # a design at another sample time acts at the wrong rate; a stamp's last bits do not
+        if not math.isclose(model.dt, self.dt, rel_tol=1e-9):
             raise ValueError(
-                f"the {source} design model has dt {model.dt:g} s but the env's plant {self.dt:g} s: "
+                f"the {source} design model has dt {model.dt:.12g} s but the env's plant {self.dt:.12g} s: "
                 "design on 'truth' (the plant itself)"
             )
         return model

@@ -19,6 +19,11 @@ MAX_CSV_BYTES = 1 << 30
 # A record sampled less often than daily holds no engine or nozzle dynamics, and a longer step
 # drives the time axes of the report's figures towards overflow (--dt 1e300 did).
 MAX_DT = 86_400.0
+# A step under a nanosecond is no test rig's, and it drives the figures' time axes to zero width
+# (--dt 1e-300 wrote a model no env takes; 1e-320 failed inside the plotting).
+MIN_DT = 1e-9
+# Relative distance within which a record's step is taken as the shorter decimal (0.04)
+SNAP_TOLERANCE = 1e-10
 # A time stamp is only known to the float resolution of its magnitude (2.4e-7 s at epoch-style
 # times near 1.7e9 s): uniform steps below a hundred times that cannot be told from irregular ones.
 MIN_STEP_RESOLUTIONS = 100
@@ -77,8 +82,18 @@ def _sample_time(path: Path, t: np.ndarray, dt: float | None) -> float:
     slope = float(np.dot(k, t - t[0]) / np.dot(k, k))
     if dt is not None and abs(dt - slope) > 1e-6 * slope:
         raise ValueError(f"{path}: dt={dt:g} s disagrees with column 't' (step {slope:g} s)")
-    # the median step as before where the two agree to rounding (0.04, not 0.04000000000000001)
-    return step if abs(step - slope) <= 1e-12 * step else slope
+    return _shortest_decimal(slope, SNAP_TOLERANCE * slope)
+
+
+def _shortest_decimal(value: float, tolerance: float) -> float:
+    """The decimal of fewest significant digits within ``tolerance`` of ``value``: stamps written
+    as ``i * 0.04`` give steps of 0.04 up to their rounding (0.040000000000000036 as the median),
+    and the sample time the data were taken at is 0.04, which the envs' plants are then equal to."""
+    for digits in range(1, 18):
+        rounded = float(f"{value:.{digits}g}")
+        if abs(rounded - value) <= tolerance:
+            return rounded
+    return value
 
 
 def read_columns(
@@ -140,6 +155,8 @@ def read_columns(
     dt = check_dt(dt)
     if dt > MAX_DT:
         raise ValueError(f"{path}: sample time {dt:g} s is over a day ({MAX_DT:g} s): no dynamics to follow")
+    if dt < MIN_DT:
+        raise ValueError(f"{path}: sample time {dt:g} s is under a nanosecond ({MIN_DT:g} s)")
     return data[:, : len(columns)], dt
 
 
