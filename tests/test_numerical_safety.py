@@ -44,6 +44,7 @@ from ssme_envs.models.nozzle import (
     simulate_nozzle,
     stiff_rates,
 )
+from ssme_envs.models.nozzle_joint import MAX_N
 from ssme_envs.models.statespace import AlphaCanonicalModel
 
 NOZZLE = "ssme_envs/NozzleTVC-v0"
@@ -411,6 +412,25 @@ def test_the_loader_refuses_booleans_and_an_overflowing_normalization():
         NozzleParameters(**{**GOOD, "J": True})
     with pytest.raises(ValueError, match="not finite"):
         NozzleParameters(**{**GOOD, "A": 1e3, "n": 200.0})  # A^(n - 1) = 1e597
+
+
+@pytest.mark.parametrize("env_id", [NOZZLE, LAUNCHER])
+def test_the_largest_bouc_wen_exponent_steps_finitely_and_a_larger_is_refused(env_id):
+    """At n = MAX_N a random-action run stays finite (at n = 1e22 every step was non-finite); above
+    it the joint is refused, naming n."""
+    assert MAX_N >= 20  # the literature's exponents, and the fits' 1-2, are taken
+    steepest = NozzleParameters(**{**GOOD, "n": MAX_N})
+    env = gym.make(env_id, plant=steepest)
+    env.reset(seed=0)
+    rng = np.random.default_rng(0)
+    for _ in range(200):
+        _, reward, terminated, truncated, info = env.step(rng.uniform(-1, 1, size=1).astype(np.float32))
+        assert np.isfinite(reward) and not info.get("nonfinite", False)
+        if terminated or truncated:
+            env.reset()
+    for n in (np.nextafter(MAX_N, np.inf), 1e22):
+        with pytest.raises(ValueError, match=r"nozzle parameter n must be at most 1000, got"):
+            NozzleParameters(**{**GOOD, "n": n})
 
 
 # --- engines: an unstable identified model is refused

@@ -29,6 +29,11 @@ DEFAULT_TORQUE_LIMIT = 3.0e4  # N m, an assumption: about 4x the 7.5e3 N m of a 
 _DATA = resources.files("ssme_envs") / "models" / "data"
 
 
+# The Bouc-Wen exponent's largest value: fits give n of 1-2 and the literature under 20; at 1e22
+# the joint's steps turned non-finite at once (|w|^n and its floor 1e-30^(1/n) round to 0 and 1).
+MAX_N = 1000.0
+
+
 @dataclass(frozen=True)
 class NozzleParameters:
     """Bouc-Wen nozzle in the paper's (Table 1) form. ``a = 1`` gives the linear joint.
@@ -58,6 +63,11 @@ class NozzleParameters:
         for name in ("J", "k", "A", "n"):
             if getattr(self, name) <= 0:
                 raise ValueError(f"nozzle parameter {name} must be positive, got {getattr(self, name)}")
+        if self.n > MAX_N:
+            raise ValueError(
+                f"nozzle parameter n must be at most {MAX_N:g}, got {self.n:g} (a larger exponent gives "
+                "the elastoplastic loop, and past about 1e20 non-finite steps)"
+            )
         if self.b < 0:
             raise ValueError(f"nozzle damping b must be >= 0, got {self.b}")
         if not 0 <= self.a <= 1:
@@ -373,6 +383,7 @@ __all__ = [
     "DEFAULT_SUBSTEPS",
     "DEFAULT_TORQUE_LIMIT",
     "KERNEL",
+    "MAX_N",
     "NOZZLE_DT",
     "NozzleParameters",
     "RK4Parameters",
