@@ -12,6 +12,7 @@ from typing import Any
 from agents.hyperparameters import check_hyperparameters
 from agents.policy_files import algorithm_class as _algorithm
 from agents.residual import check_residual
+from ssme_envs.input_files import FileTooLarge, NotRegularFile, read_bounded
 
 try:
     import tomllib
@@ -38,6 +39,8 @@ CONFIG_KEYS = {
 DEFAULTS = {"steps": 200_000, "seed": 0, "num_envs": 64, "eval_freq": 50_000, "eval_episodes": 20,
             "tensorboard": False, "env_options": {}, "hyperparameters": {}, "policy": {}}  # fmt: skip
 RESIDUAL_SCALE = 0.5  # the residual's default action scale
+MAX_SEED = 2**32 - 1
+MAX_CONFIG_BYTES = 1 << 20  # a run config is a page of TOML; this stops /dev/zero and its like
 # policy.net_arch bounds: far beyond what these envs need (64 x 64 does), and a layer of MAX_UNITS
 # squared float32 weights (64 MiB, times the optimizer's copies) still fits any machine that trains
 MAX_LAYERS, MAX_UNITS = 16, 4096
@@ -61,6 +64,8 @@ def check_config(config: dict[str, Any], source: str = "config") -> dict[str, An
     for key in ("steps", "num_envs", "eval_freq", "eval_episodes"):
         if full[key] < 1:
             raise ValueError(f"{source}: {key} must be positive, got {full[key]}")
+    if not 0 <= full["seed"] <= MAX_SEED:  # numpy's and SB3's seeding take 32 bits
+        raise ValueError(f"{source}: seed must be within 0-{MAX_SEED}, got {full['seed']}")
     accepted = inspect.signature(_algorithm(full["algo"]).__init__).parameters
     check_hyperparameters(full["algo"], full["hyperparameters"], accepted, source)
     starts = full["hyperparameters"].get("learning_starts", 0)
@@ -99,10 +104,21 @@ def check_config(config: dict[str, Any], source: str = "config") -> dict[str, An
 
 
 def load_config(path: Path) -> dict[str, Any]:
+    """The TOML of a run config as a dict; ValueError naming the file for anything but a regular
+    UTF-8 file of at most :data:`MAX_CONFIG_BYTES` holding valid TOML (a FIFO would block the
+    read, a device such as /dev/zero never end it)."""
     try:
-        data = tomllib.loads(Path(path).read_text())
+        data = tomllib.loads(read_bounded(path, MAX_CONFIG_BYTES).decode("utf-8"))
+    except FileNotFoundError:
+        raise ValueError(f"cannot read config {path}: no such file") from None
+    except NotRegularFile as exc:
+        raise ValueError(f"cannot read config {path}: not a regular file ({exc.kind})") from None
+    except FileTooLarge:
+        raise ValueError(f"cannot read config {path}: larger than {MAX_CONFIG_BYTES >> 10} KiB") from None
     except OSError as exc:
         raise ValueError(f"cannot read config {path}: {exc.strerror}") from None
+    except UnicodeDecodeError:
+        raise ValueError(f"cannot read config {path}: not UTF-8 text") from None
     except tomllib.TOMLDecodeError as exc:
         raise ValueError(f"{path}: not valid TOML ({exc})") from None
     return data

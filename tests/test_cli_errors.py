@@ -90,6 +90,19 @@ BAD_CSV = ["identify", "engine", "--data", "{d}/bad.csv", "--out", "{d}/out"]
 VALIDATE = ["validate", "engine", "--model", "{d}/bad.json", "--data", "{d}/r.csv", "--out", "{d}/out"]
 NOZZLE_EVAL = ["evaluate", "--env", "ssme_envs/NozzleTVC-v0", "--controllers", "zero", "--scenario", "step"]
 EVAL = [*NOZZLE_EVAL, "--out", "{d}/out"]
+TRAIN = ["train", "--out", "{d}/out", "--config"]
+TUNE = [
+    "tune",
+    "--env",
+    "ssme_envs/NozzleTVC-v0",
+    "--algo",
+    "ppo",
+    "--storage",
+    "journal:{d}/j.log",
+    "--study",
+    "s",
+]
+GOOD_CONFIG = b'env = "ssme_envs/NozzleTVC-v0"\nalgo = "ppo"\nsteps = 64\n'
 DEEP = "[" * 100_000 + "]" * 100_000
 PLANT_EVAL = ["evaluate", "--env", "ssme_envs/EngineTracking-v0", "--controllers", "pi", "--scenario",
               "pc_step", "--episodes", "1", "--plant", "{d}/bad.json", "--out", "{d}/out"]  # fmt: skip
@@ -256,6 +269,21 @@ CATALOGUE = [
      "--workers 1000000000 needs about", None, 2),
     ("normalization-inf", "--normalization-a inf", ["identify", "nozzle", "--normalization-a", "inf", "--out",
      "{d}/out"], {}, "--normalization-a must be a positive", None, 2),
+    ("dt-under-a-nanosecond", "--dt 1e-300", [*ENGINE, "--dt", "1e-300"], {"r.csv": "asset:r.csv"},
+     r"--dt must be at least 1e-09 s \(a nanosecond\), got 1e-300", None, 2),
+    ("train-config-dir", "train --config DIR", [*TRAIN, "{d}/c.toml"], {"c.toml": "dir"},
+     r"cannot read config .*c\.toml: not a regular file \(a directory\)", None, 2),
+    ("train-config-not-utf8", "train --config latin-1", [*TRAIN, "{d}/c.toml"], {"c.toml": b"env = '\xe9'\n"},
+     r"cannot read config .*c\.toml: not UTF-8 text", None, 2),
+    ("train-seed-huge", "train --seed 10**14", [*TRAIN, "{d}/c.toml", "--seed", "99999999999999"],
+     {"c.toml": GOOD_CONFIG}, r"--seed must be within 0-4294967295, got 99999999999999", None, 2),
+    ("train-config-seed-huge", "seed = 10**14 in the config", [*TRAIN, "{d}/c.toml"],
+     {"c.toml": GOOD_CONFIG + b"seed = 99999999999999\n"},
+     r"config .*c\.toml: seed must be within 0-4294967295, got 99999999999999", None, 2),
+    ("tune-seed-huge", "tune --seed 10**14", [*TUNE, "--seed", "99999999999999"], {},
+     r"--seed must be an integer within 0-4294967295", None, 2),
+    ("tune-eval-episodes-huge", "tune --eval-episodes 10**12", [*TUNE, "--eval-episodes", "999999999999"], {},
+     r"--eval-episodes 999999999999 needs about", None, 2),
     ("sizes-zero", "bench --sizes 0", ["bench", "--sizes", "0"], {}, "--sizes must be positive", None, 2),
     ("sizes-huge", "bench --sizes 10**12", ["bench", "--sizes", "1000000000000"], {},
      "--sizes 1000000000000 needs about", None, 2),
@@ -377,6 +405,34 @@ def test_a_fifo_named_as_the_model_is_refused_without_waiting_for_a_writer(tmp_p
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert err == f"error: {fifo}: not valid JSON: it is a FIFO (named pipe), not a regular file\n", err
+    assert time.perf_counter() - start < 5.0
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        ([*TRAIN, "{d}/fifo"], "error: cannot read config {d}/fifo: not a regular file (a FIFO)\n"),
+        (
+            ["tune", "--env", "ssme_envs/NozzleTVC-v0", "--algo", "ppo", "--storage", "journal:{d}/fifo",
+             "--study", "s"],
+            "error: --storage journal:{d}/fifo: {d}/fifo is not a regular file\n",
+        ),
+    ],
+    ids=["train-config", "tune-journal"],
+)  # fmt: skip
+def test_a_fifo_named_as_a_config_or_journal_is_refused_without_waiting(tmp_path, capsys, argv, message):
+    os.mkfifo(tmp_path / "fifo")
+    fifo = tmp_path / "fifo"
+
+    def unblock() -> None:  # a reader blocked opening the FIFO then reads end of file, not a hang
+        time.sleep(5.0)
+        with contextlib.suppress(OSError):
+            os.close(os.open(fifo, os.O_WRONLY | os.O_NONBLOCK))
+
+    threading.Thread(target=unblock, daemon=True).start()
+    start = time.perf_counter()
+    assert main([a.format(d=tmp_path) for a in argv]) == 2
+    assert capsys.readouterr().err == message.format(d=tmp_path)
     assert time.perf_counter() - start < 5.0
 
 

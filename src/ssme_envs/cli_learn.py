@@ -68,6 +68,7 @@ def add_learning_commands(commands: Any) -> None:
 
 
 def train_command(args: argparse.Namespace) -> int:
+    from agents.run_config import MAX_SEED
     from agents.sb3 import check_config, load_config, train
     from ssme_envs.evaluation import check_env_id
 
@@ -77,6 +78,8 @@ def train_command(args: argparse.Namespace) -> int:
     if args.tensorboard:
         config["tensorboard"] = True
     source = f"config {args.config}" if args.config is not None else "options"
+    if args.seed is not None and not 0 <= args.seed <= MAX_SEED:  # named as given, not as the config's
+        raise ValueError(f"--seed must be within 0-{MAX_SEED}, got {args.seed}")
     config = check_config(config, source)
     check_env_id(config["env"])  # before the output directory is made
     check_training(config)

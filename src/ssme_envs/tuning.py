@@ -63,6 +63,8 @@ def open_storage(url: str) -> Any:
             raise ValueError(f"--storage {url}: journal:PATH needs a file path")
         if not path.parent.is_dir():
             raise ValueError(f"--storage {url}: directory {path.parent} does not exist")
+        if path.exists() and not path.is_file():  # a FIFO blocks Optuna's read, a device never ends it
+            raise ValueError(f"--storage {url}: {path} is not a regular file")
         from optuna.storages.journal import JournalFileBackend
 
         _check_journal_lines(path, url)
@@ -292,7 +294,7 @@ def tune(
     import optuna
 
     from agents.policy_files import algorithm_class
-    from agents.run_config import DEFAULTS
+    from agents.run_config import DEFAULTS, MAX_SEED
     from ssme_envs.cli_checks import check_episodes, check_training
     from ssme_envs.evaluation import check_env_id
 
@@ -302,9 +304,9 @@ def tune(
     check_budget(trials, timesteps, num_envs, evaluations, eval_episodes)
     largest = {"n_steps": max(PPO_N_STEPS)} if algo == "ppo" else {"buffer_size": buffer_size(timesteps)}
     check_training({"env": env_id, "algo": algo, "num_envs": num_envs, "hyperparameters": largest})
-    check_episodes(eval_episodes, {env_id: 1})
-    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-        raise ValueError(f"--seed must be a non-negative integer, got {seed!r}")
+    check_episodes(eval_episodes, {env_id: 1}, option="--eval-episodes")
+    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= MAX_SEED:
+        raise ValueError(f"--seed must be an integer within 0-{MAX_SEED}, got {seed!r}")
     if not study_name:
         raise ValueError("--study must be a non-empty name")
     optuna.logging.set_verbosity(optuna.logging.INFO if progress else optuna.logging.WARNING)
