@@ -3,6 +3,7 @@ that do not fit the record, and model files that claim impossible structures."""
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 import re
@@ -12,6 +13,7 @@ import pytest
 from conftest import dlsim, eq36
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from hypothesis.extra import numpy as hnp
 
 from ssme_envs.identification import identify
 from ssme_envs.models import AlphaCanonicalModel, published_model
@@ -117,3 +119,230 @@ def test_values_whose_squares_overflow_are_refused_by_name(scale, method):
     call = (lambda: identify(u, y, 0.04)) if method == "identify" else (lambda: dsr_e(u, y, 0.04))
     with pytest.raises(ValueError, match=r"output '[^']+' reaches .*: its squares overflow float64"):
         call()
+
+
+# ---- identify's arguments, checked before any work (ssme_envs.identification.arguments) ----
+
+
+@functools.cache
+def _clean() -> tuple[np.ndarray, np.ndarray]:
+    u, y = _record(0.0, 0, seed=2)
+    u.flags.writeable = y.flags.writeable = False  # shared by the tests below
+    return u, y
+
+
+@pytest.fixture
+def no_work(monkeypatch):
+    """Makes any work past the argument checks fail loudly: an argument refused must be refused
+    before the record is even read."""
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("the record was read before the arguments were checked")
+
+    monkeypatch.setattr("ssme_envs.identification.alpha_canonical.check_record", refuse)
+
+
+def _refused(error: type[Exception], pattern: str, *args, **kwargs) -> str:
+    """Calls identify, checks it raises ``error`` whose message matches ``pattern`` from its
+    start, and returns the message."""
+    with pytest.raises(error, match=pattern) as info:
+        identify(*args, **kwargs)
+    # the wrong kind of thing is a TypeError, and a ValueError for the callers that catch those
+    assert isinstance(info.value, ValueError)
+    return str(info.value)
+
+
+@pytest.mark.parametrize(
+    ("which", "pattern"),
+    [
+        ("u", r"^u needs at least one input column, got shape \(1016, 0\)"),
+        ("y", r"^y needs at least one output column, got shape \(1016, 0\)"),
+    ],
+)
+@pytest.mark.parametrize("indices", [None, (2, 2)])
+def test_a_record_without_columns_is_refused_by_name(which, pattern, indices, no_work):
+    # used to divide by zero in the structure search's instrument depth
+    u, y = _clean()
+    u, y = (u[:, :0], y) if which == "u" else (u, y[:, :0])
+    _refused(ValueError, pattern, u, y, 0.04, indices=indices)
+
+
+@settings(max_examples=25, deadline=None)
+@given(samples=st.integers(0, 85), seed=st.integers(0, 2**16))
+def test_a_record_too_short_for_the_search_is_refused_before_its_values_are_read(samples, seed):
+    # an empty record used to fail in numpy's reduction ("zero-size array to reduction operation")
+    rng = np.random.default_rng(seed)
+    u, y = rng.normal(size=(samples, 2)), rng.normal(size=(samples, 2))
+    _refused(ValueError, rf"^the record has {samples} samples; a structure search", u, y, 0.04)
+
+
+@pytest.mark.parametrize("samples", [0, 1, 2])
+def test_a_record_too_short_for_the_indices_is_refused_before_its_values_are_read(samples, no_work):
+    u, y = np.zeros((samples, 2)), np.zeros((samples, 2))
+    _refused(
+        ValueError,
+        rf"^the record has {samples} samples, observability indices \[2, 2\]",
+        u,
+        y,
+        0.04,
+        indices=(2, 2),
+    )
+
+
+# np.zeros of dtype object holds ints, numbers: objects that are not are the parametrized test's
+_NOT_REAL = st.one_of(
+    hnp.complex_number_dtypes(),
+    hnp.boolean_dtypes(),
+    hnp.unicode_string_dtypes(),
+    hnp.byte_string_dtypes(),
+    hnp.datetime64_dtypes(),
+    hnp.timedelta64_dtypes(),
+)
+
+
+@settings(max_examples=30, deadline=None)
+@given(dtype=_NOT_REAL, which=st.sampled_from(["u", "y"]))
+def test_a_record_of_anything_but_real_numbers_is_refused_by_name(dtype, which):
+    # a complex record used to lose its imaginary part with a mere ComplexWarning
+    u, y = _clean()
+    bad = np.zeros(u.shape, dtype=dtype)
+    args = (bad, y) if which == "u" else (u, bad)
+    _refused(TypeError, rf"^{which} must be real numbers .*, got {re.escape(str(dtype))}$", *args, 0.04)
+
+
+@pytest.mark.parametrize(
+    ("change", "shown"),
+    [
+        (lambda u: u + 1j * u, "complex128"),
+        (lambda u: u > 0, "bool"),
+        (lambda u: u.astype(str), "<U"),
+        (lambda u: [[True, 0.5]] * len(u), "a list holding bools"),
+        (lambda u: [[None, 0.5]] * len(u), "list of dtype object"),
+        (lambda u: [["0.01", 0.5]] * len(u), "list of dtype <U"),
+        (lambda u: None, "NoneType of dtype object"),
+    ],
+)
+def test_the_envs_words_for_a_record_that_is_not_numbers(change, shown, no_work):
+    u, y = _clean()
+    _refused(
+        TypeError,
+        rf"^u must be real numbers \(an int or float array .*\), got {re.escape(shown)}",
+        change(u),
+        y,
+        0.04,
+    )
+
+
+@settings(max_examples=15, deadline=None)
+@given(data=st.data(), which=st.sampled_from(["u", "y"]))
+def test_a_masked_record_is_refused_not_unmasked(data, which):
+    u, y = _clean()
+    mask = data.draw(hnp.arrays(bool, u.shape).filter(np.any))
+    args = (np.ma.masked_array(u, mask=mask), y) if which == "u" else (u, np.ma.masked_array(y, mask=mask))
+    _refused(ValueError, rf"^{which} has {int(mask.sum())} masked values? of 2032", *args, 0.04)
+
+
+@pytest.mark.parametrize("name", ["asymmetric", "uncertainty"])
+@pytest.mark.parametrize("value", ["no", "false", "", 0, 1, 1.0, None, [True], np.array([True])])
+def test_a_flag_must_be_a_bool(name, value, no_work):
+    # "no" and "false" used to be taken as true
+    u, y = _clean()
+    _refused(
+        TypeError, rf"^{name} must be True or False, got {type(value).__name__} ", u, y, 0.04, **{name: value}
+    )
+
+
+@pytest.mark.parametrize("name", ["input_names", "output_names"])
+@pytest.mark.parametrize(
+    ("value", "error"),
+    [
+        ("ab", TypeError),  # used to name the channels 'a' and 'b'
+        (b"ab", TypeError),
+        ({"a", "b"}, TypeError),
+        ({"a": 0, "b": 1}, TypeError),
+        ((1, 2), TypeError),
+        (("a", None), TypeError),
+        ("a", TypeError),
+        (("a",), ValueError),
+        (("a", "b", "c"), ValueError),
+        (("a", "a"), ValueError),
+    ],
+)
+def test_channel_names_must_be_distinct_strings_one_per_column(name, value, error, no_work):
+    u, y = _clean()
+    column = "u" if name == "input_names" else "y"
+    _refused(
+        error,
+        rf"^{name} must be 2 distinct str, one per column of {column}, got",
+        u,
+        y,
+        0.04,
+        **{name: value},
+    )
+
+
+@pytest.mark.parametrize(
+    ("name", "value", "error", "pattern"),
+    [
+        ("max_index", 2.5, TypeError, "must be a positive integer"),
+        ("max_index", "3", TypeError, "must be a positive integer"),
+        ("max_index", True, TypeError, "must be a positive integer"),
+        ("max_index", None, TypeError, "must be a positive integer"),
+        ("max_index", 0, ValueError, "must be >= 1, got 0"),
+        ("max_index", -3, ValueError, "must be >= 1, got -3"),
+        ("rank_tol", "x", TypeError, r"must be in \(0, 1\), a finite real number, got str 'x'"),
+        ("rank_tol", True, TypeError, r"must be in \(0, 1\)"),
+        ("rank_tol", 0.1 + 0j, TypeError, r"must be in \(0, 1\)"),
+        ("rank_tol", math.nan, ValueError, r"must be in \(0, 1\), a finite real number, got nan"),
+        ("rank_tol", 1, ValueError, r"must be in \(0, 1\)"),
+        ("rank_tol", 0.0, ValueError, r"must be in \(0, 1\)"),
+        ("indices", 2, TypeError, "must be 2 observability indices"),
+        ("indices", "22", TypeError, "must be 2 observability indices"),
+        ("indices", {2, 3}, TypeError, "must be 2 observability indices"),
+        ("indices", np.array([[2, 2]]), TypeError, "must be 2 observability indices"),
+        ("indices", (True, 2), TypeError, "must be positive integers"),
+        ("indices", ("2", 2), TypeError, "must be positive integers"),
+        ("indices", (2,), ValueError, ": 1 observability indices given for 2 outputs"),
+        ("indices", (0, 2), ValueError, "must be positive integers"),
+        ("method", "IV", ValueError, "must be 'iv' or 'ls', got 'IV'"),
+        ("method", ["iv"], ValueError, r"must be 'iv' or 'ls', got \['iv'\]"),
+        ("method", None, ValueError, "must be 'iv' or 'ls', got None"),
+        ("dt", "0.04", ValueError, "must be a positive number of seconds, got '0.04'"),
+        ("dt", True, ValueError, "must be a positive number of seconds"),
+    ],
+)
+def test_each_option_is_refused_by_name(name, value, error, pattern, no_work):
+    # max_index=2.5, rank_tol="x" and indices=2 used to fail deep inside with Python's words
+    u, y = _clean()
+    options = {"dt": 0.04, name: value}
+    _refused(error, rf"^{name}{'' if pattern.startswith(':') else ' '}{pattern}", u, y, **options)
+
+
+@settings(max_examples=30, deadline=None)
+@given(value=st.one_of(st.floats(), st.text(max_size=3), st.booleans(), st.none(), st.complex_numbers()))
+def test_max_index_takes_integers_only(value):
+    u, y = _clean()
+    _refused(TypeError, r"^max_index must be a positive integer", u, y, 0.04, max_index=value)
+
+
+@settings(max_examples=30, deadline=None)
+@given(value=st.floats().filter(lambda v: not 0 < v < 1) | st.integers())
+def test_rank_tol_outside_zero_one_is_refused(value):
+    u, y = _clean()
+    _refused(ValueError, r"^rank_tol must be in \(0, 1\)", u, y, 0.04, rank_tol=value)
+
+
+def test_integer_lists_and_unmasked_records_give_the_float_arrays_model():
+    """Integers are read as floats: an integer record, as an array or as lists, and a masked
+    array without a masked value, give the float record's model to the last bit."""
+    truth = published_model(100)
+    u = np.rint(prbs(600, amplitude=1.0)).astype(np.int64)
+    y = np.rint(1e4 * dlsim(truth.A, truth.B, truth.C, eq36(u.astype(float), truth.lam))).astype(np.int32)
+    y = y + np.random.default_rng(0).integers(-3, 4, y.shape, dtype=np.int32)
+    options = {"indices": np.array([2, 2]), "max_index": np.int64(4), "asymmetric": np.bool_(True)}
+    reference = identify(u.astype(float), y.astype(float), 0.04, **options).model
+    for args in ((u, y), (u.tolist(), y.tolist()), (np.ma.masked_array(u, mask=False), y)):
+        model = identify(*args, 0.04, **options).model
+        for field in ("A", "B", "C", "lam"):
+            np.testing.assert_array_equal(getattr(model, field), getattr(reference, field))
+        assert model.observability_indices == (2, 2)

@@ -41,6 +41,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ssme_envs.identification.alpha_fit import _binary_amplitudes, _Fit, _fit, _input_features
+from ssme_envs.identification.arguments import check_arguments
 from ssme_envs.identification.covariance import parameter_uncertainty
 from ssme_envs.identification.output_error import held_out_criterion, refine_contenders
 from ssme_envs.identification.records import check_magnitudes
@@ -53,7 +54,7 @@ from ssme_envs.identification.structure import (
     explore,
 )
 from ssme_envs.identification.structure import estimate_indices as structure_search
-from ssme_envs.models.statespace import AlphaCanonicalModel, AlphaStructure, check_dt
+from ssme_envs.models.statespace import AlphaCanonicalModel, AlphaStructure
 
 # Share of the record the candidate structures are fitted on; the rest scores them.
 ESTIMATION_SHARE = 2 / 3
@@ -67,18 +68,6 @@ class Identification:
     search: StructureSearch | None
     intercept: np.ndarray
     method: str
-
-
-def _check_indices(indices: Sequence[int], samples: int, p: int) -> None:
-    """ValueError unless ``indices`` are p positive integers below the record's length (checked
-    before the structure is built: an index of 1e7 would make 1e7 states)."""
-    idx = list(indices)
-    if len(idx) != p:
-        raise ValueError(f"{len(idx)} observability indices given for {p} outputs")
-    if not all(isinstance(v, int | np.integer) and not isinstance(v, bool) and v >= 1 for v in idx):
-        raise ValueError(f"observability indices must be positive integers, got {idx}")
-    if max(idx) >= samples:
-        raise ValueError(f"the record has {samples} samples, observability indices {idx} need more")
 
 
 def _names(names: Sequence[str] | None, count: int, prefix: str) -> tuple[str, ...]:
@@ -177,36 +166,54 @@ def identify(
     Parameters
     ----------
     u, y : arrays, shapes (T, m), (T, p)
-        Inputs and outputs as deviations from the operating point, one row per sample.
+        Inputs and outputs as deviations from the operating point, one row per sample: real
+        numbers (integers are read as floats), at least one column each, no masked values.
     dt : float
         Sample time, s.
     indices : sequence of int, optional
-        Observability indices. When omitted, the rank search (:func:`estimate_indices`) proposes
-        its index set and the sets one decision away, and the one with the lowest BIC of its
-        simulation error is kept (``result.search`` holds every candidate and the margin).
+        Observability indices, ``p`` positive integers. When omitted, the rank search
+        (:func:`estimate_indices`) proposes its index set and the sets one decision away, and the
+        one with the lowest BIC of its simulation error is kept (``result.search`` holds every
+        candidate and the margin).
     method : {"iv", "ls"}
         "ls" is eq 27 as in the paper; "iv" adds two instrumental-variable passes.
     asymmetric : bool
         Estimate the lambda gains of eq 36 (otherwise lambda = 1).
-    max_index, rank_tol : see :func:`estimate_indices`.
+    max_index, rank_tol : int >= 1, float in (0, 1)
+        See :func:`estimate_indices`.
     input_names, output_names : sequences of str, optional
-        Carried into the model and used in error messages.
+        ``m`` and ``p`` distinct names, carried into the model and used in error messages.
     uncertainty : bool
         Attach the covariance of the free parameters (``model.uncertainty``).
 
     Returns
     -------
     Identification
+
+    Raises
+    ------
+    TypeError, ValueError
+        Before any work, for an argument of the wrong kind or out of range, naming it
+        (:func:`~ssme_envs.identification.arguments.check_arguments`; its TypeErrors are
+        ValueErrors too), or a record too short for the indices or the structure search; then
+        for a record :func:`check_record` refuses, or one the fit cannot determine.
     """
-    if method not in ("iv", "ls"):
-        raise ValueError(f"method must be 'iv' or 'ls', got {method!r}")
-    dt = check_dt(dt)
-    in_names = _names(input_names, np.shape(u)[-1] if np.ndim(u) == 2 else 1, "u")
-    out_names = _names(output_names, np.shape(y)[-1] if np.ndim(y) == 2 else 1, "y")
-    u, y = check_record(u, y, in_names, out_names)
+    args = check_arguments(
+        u,
+        y,
+        dt,
+        indices=indices,
+        method=method,
+        asymmetric=asymmetric,
+        max_index=max_index,
+        rank_tol=rank_tol,
+        input_names=input_names,
+        output_names=output_names,
+        uncertainty=uncertainty,
+    )
+    dt, indices, in_names, out_names = args.dt, args.indices, args.input_names, args.output_names
+    u, y = check_record(args.u, args.y, in_names, out_names)
     names = (in_names, out_names)
-    if indices is not None:
-        _check_indices(indices, u.shape[0], y.shape[1])
 
     search = None
     if indices is None:
