@@ -14,7 +14,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import ssme_envs.models
-from ssme_envs.models.engine import TruthConfig
+from ssme_envs.envs.engine_throttle import power_profile
+from ssme_envs.envs.inputs import batch_actions
+from ssme_envs.envs.references import FAULT_KINDS, Fault
+from ssme_envs.models.engine import ENGINE_DT, TruthConfig
 from ssme_envs.models.nozzle import NOZZLE_DT
 
 TRACKING = "ssme_envs/EngineTracking-v0"
@@ -330,7 +333,7 @@ def test_bool_num_envs_and_time_limits_are_refused():
     ("profile", "message"),
     [
         ([(0.0, 100.0), (1e7, 100.0)], "profile must end within 3600 s"),
-        ([(0.0, 100.0), (10**400, 100.0)], "at least two"),
+        ([(0.0, 100.0), (10**400, 100.0)], "profile time must be finite, got an integer of about 401 digits"),
         ([(0.0, 100.0), ("a", 100.0)], "at least two"),
     ],
 )
@@ -521,3 +524,149 @@ def test_numpy_numbers_are_accepted_as_python_numbers(env_id, options, plain):
 def test_uncertainty_scale_is_always_checked(env_id, scale, spread):
     with pytest.raises(ValueError, match="uncertainty_scale"):
         gym.make(env_id, uncertainty_scale=scale, plant_spread=spread)
+
+
+# 8. dict options with keys of any type, fault kinds, profile entries, masked actions
+
+FAULT_KEYS = ("kind", "time", "index", "magnitude")
+TRUTH_KEYS = tuple(TruthConfig.__dataclass_fields__)
+odd_keys = st.sampled_from([1, 2.5, None, (1, 2), b"kind", frozenset(), np.int64(3), np.str_("tim")])
+
+
+@FEW
+@given(
+    keys=st.lists(
+        odd_keys | st.text(max_size=6).filter(lambda key: key not in FAULT_KEYS + TRUTH_KEYS),
+        min_size=1,
+        max_size=3,
+        unique_by=repr,
+    )
+)
+def test_dict_options_name_their_unknown_keys_of_any_type(keys):
+    """{1: 2} once failed joining the keys, {1: 2, "a": 3} sorting them: TypeErrors of neither."""
+    extra = dict.fromkeys(keys, 2)
+    for option, given_, noun in (
+        ("fault", {"kind": "sensor_bias", "time": 1.0}, "key"),
+        ("truth", {"backlash": 1e-4}, "option"),
+    ):
+        with pytest.raises(ValueError, match=rf"^{option}: unknown {noun}\(s\) ") as error:
+            gym.make(TRACKING, **{option: {**given_, **extra}})
+        message = str(error.value)
+        assert all(repr(key) in message for key in extra), message
+        assert "it takes 'kind', 'time'" in message if option == "fault" else "'backlash'" in message
+
+
+@pytest.mark.parametrize("env_id", [TRACKING, THROTTLE, NOZZLE, LAUNCHER])
+def test_every_env_names_a_fault_key_that_is_not_a_string(env_id):
+    with pytest.raises(ValueError, match=r"^fault: unknown key\(s\) 1, 'a'; it takes 'kind'"):
+        gym.make(env_id, fault={1: 2, "a": 3})
+
+
+@pytest.mark.parametrize(
+    "kind", [np.array(["gain_loss"]), np.array(["gain_loss", "x"]), ["gain_loss"], b"gain_loss", 1, None]
+)
+@pytest.mark.parametrize("env_id", [TRACKING, NOZZLE])
+def test_a_fault_kind_that_is_not_a_str_is_refused_by_name(env_id, kind):
+    """A 1-element array passed ``in FAULT_KINDS`` (elementwise ==) and failed as a dict key."""
+    for fault in ({"kind": kind, "time": 1.0}, Fault(kind, 1.0)):
+        with pytest.raises(ValueError, match=r"^fault kind must be a str, one of .*gain_loss; got "):
+            gym.make(env_id, fault=fault)
+
+
+def test_a_fault_kind_message_offers_only_the_kinds_the_env_takes():
+    nozzle = ("sensor_bias", "gain_loss")
+    for kind in ("stuck_valve", "explode"):
+        with pytest.raises(
+            ValueError, match=rf"^unknown fault kind '{kind}'; choose one of sensor_bias, gain_loss$"
+        ):
+            Fault.parse({"kind": kind, "time": 1.0}, 1, 1, kinds=nozzle)
+        with pytest.raises(ValueError, match=f"choose one of {', '.join(FAULT_KINDS)}$"):
+            Fault.parse({"kind": "explode", "time": 1.0}, 2, 2)
+    assert Fault.parse({"kind": "gain_loss", "time": 1.0}, 1, 1, kinds=nozzle) == Fault(
+        "gain_loss", 1.0, 0, 0.5
+    )
+
+
+@pytest.mark.parametrize("env_id", [NOZZLE, LAUNCHER])
+def test_the_nozzle_envs_offer_only_their_fault_kinds(env_id):
+    with pytest.raises(ValueError, match=r"choose one of sensor_bias, gain_loss$"):
+        gym.make(env_id, fault={"kind": "explode", "time": 1.0})
+
+
+@pytest.mark.parametrize(
+    ("profile", "message"),
+    [
+        ([(False, 100.0), (True, 100.0)], "pairs of real numbers .*got bool False as the time of pair 0"),
+        ([("0", "100"), ("5", "90")], "got str '0' as the time of pair 0"),
+        ([(0.0, 100.0), (b"5", 90.0)], "got bytes b'5' as the time of pair 1"),
+        ([(0.0, 100.0), (5.0, np.bool_(True))], "got bool np.True_ as the power of pair 1"),
+        (np.array([[0.0, 100.0], [5.0, 90.0]]).astype(str), "got str '0.0' as the time of pair 0"),
+        ([(0.0, 100.0), (5.0, None)], "got NoneType None as the power of pair 1"),
+        ([(0.0, 100.0), (5.0, math.nan)], "power must be finite, got nan in pair 1"),
+        ([(0.0, 100.0), (math.inf, 100.0)], "time must be finite, got inf in pair 1"),
+        ([(0.0, 100.0), (5.0, 10**400)], "power must be finite, got an integer of about 401"),
+    ],
+)
+def test_a_throttle_profile_entry_that_is_no_finite_real_number_is_named(profile, message):
+    """Bools, strings and bytes once passed as numbers (np.asarray(dtype=float) reads them), and a
+    NaN power was reported as times that do not increase."""
+    with pytest.raises(ValueError, match=f"^profile.*{message}"):
+        gym.make(THROTTLE, profile=profile)
+
+
+@FEW
+@given(
+    steps=st.lists(
+        st.tuples(st.floats(0.04, 5.0) | st.integers(1, 5), st.floats(65.0, 109.0) | st.integers(65, 109)),
+        min_size=1,
+        max_size=4,
+    )
+)
+def test_a_valid_profile_gives_the_table_it_gave_before_in_any_real_form(steps):
+    times = np.cumsum([0] + [step for step, _ in steps]).tolist()
+    pairs = list(zip(times, [100] + [power for _, power in steps], strict=True))
+    forms = [pairs, tuple(pairs), np.array(pairs), [np.array(pair) for pair in pairs]]
+    forms.append([(np.float64(t), np.float32(p) if isinstance(p, float) else np.int64(p)) for t, p in pairs])
+    for form in forms:
+        points = np.asarray(form, dtype=float)  # what the profile was read as before its entries were checked
+        expected = np.interp(np.arange(round(points[-1, 0] / ENGINE_DT) + 1) * ENGINE_DT, *points.T)
+        np.testing.assert_array_equal(power_profile(form, ENGINE_DT), expected)
+
+
+MASKED = [True, [False, True], [True, False]]
+
+
+def test_a_masked_action_is_refused_unless_no_element_is_masked_then_it_is_its_data():
+    """A masked element once reached float() as None (the scalar env) or its data (the vector env)."""
+    env, same = gym.make(TRACKING).unwrapped, gym.make(TRACKING).unwrapped
+    env.reset(seed=0)
+    same.reset(seed=0)
+    for mask in MASKED:
+        for dtype in (np.float64, np.int64):
+            with pytest.raises(
+                ValueError, match=r"^action must be 2 numbers .*masked array with [12] masked"
+            ):
+                env.step(np.ma.masked_array(np.zeros(2, dtype), mask=mask))
+    for action in (np.array([0.3, -0.2]), np.array([1, 0])):
+        for form in (np.ma.masked_array(action, mask=False), np.ma.masked_array(action)):
+            a, b = env.step(form), same.step(action.astype(float))
+            np.testing.assert_array_equal(a[0], b[0])
+            assert a[1:] == b[1:]
+    venv = vector(TRACKING)
+    venv.reset(seed=0)
+    with pytest.raises(ValueError, match="masked array with 4 masked"):
+        venv.step(np.ma.masked_array(np.zeros((2, 2), int), mask=True))
+    for mask in MASKED:
+        with pytest.raises(
+            ValueError, match=r"^actions must be a float array .*masked array with [24] masked"
+        ):
+            batch_actions(np.ma.masked_array(np.zeros((2, 2)), mask=np.broadcast_to(mask, (2, 2))))
+    action = np.array([[0.3, -0.2], [1.0, 0.0]])
+    np.testing.assert_array_equal(batch_actions(np.ma.masked_array(action, mask=False)), action)
+
+
+def test_the_vector_env_refuses_a_float_masked_action():
+    venv = vector(TRACKING)
+    venv.reset(seed=0)
+    with pytest.raises(ValueError, match="masked array with 4 masked"):
+        venv.step(np.ma.masked_array(np.zeros((2, 2)), mask=True))

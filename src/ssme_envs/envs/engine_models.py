@@ -10,7 +10,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from ssme_envs.envs.task import check_number, check_numbers
+from ssme_envs.envs.task import check_keys, check_number, check_numbers
 from ssme_envs.models.engine import (
     POWER_LEVELS,
     TruthConfig,
@@ -41,9 +41,7 @@ def resolve_truth(truth: TruthConfig | Mapping[str, Any] | None) -> TruthConfig:
     if isinstance(truth, TruthConfig):
         fields = {name: getattr(truth, name) for name in TruthConfig.__dataclass_fields__}
     elif isinstance(truth, Mapping):
-        unknown = sorted(set(truth) - set(TruthConfig.__dataclass_fields__))
-        if unknown:
-            raise ValueError(f"truth: unknown option(s) {', '.join(unknown)}")
+        check_keys("truth", truth, tuple(TruthConfig.__dataclass_fields__), "option")
         fields = dict(truth)
     else:
         raise ValueError(f"truth must be a TruthConfig or a dict, got {type(truth).__name__}")

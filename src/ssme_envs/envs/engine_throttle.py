@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -14,7 +15,7 @@ from ssme_envs.envs.engine_nonlinear_plant import nonlinear_engine_of, nonlinear
 from ssme_envs.envs.engine_task import EnginePlant, EngineTask, resolve_truth
 from ssme_envs.envs.engine_tracking import EngineTrackingEnv
 from ssme_envs.envs.references import Fault
-from ssme_envs.envs.task import MAX_EPISODE_SECONDS, Carrier, Schedule, Value
+from ssme_envs.envs.task import MAX_EPISODE_SECONDS, Carrier, Schedule, Value, real_number, shown
 from ssme_envs.models import engine_step
 from ssme_envs.models.engine import ENGINE_DT, TruthConfig
 from ssme_envs.models.engine_nonlinear import NonlinearEngine
@@ -35,15 +36,34 @@ MISSION_PROFILE: tuple[tuple[float, float], ...] = (
 )  # fmt: skip
 
 
+def _profile_points(profile: Any) -> np.ndarray:
+    """The profile's (time s, power %) breakpoints as an (n, 2) float array, each entry checked
+    first to be a finite real number (``np.asarray(dtype=float)`` reads True as 1, "5" and b"5" as
+    5): ValueError naming the entry and its pair otherwise."""
+    pairs = "profile must be a list of at least two (time s, power %) pairs"
+    try:  # the entries as given (bools and strings kept), in the profile's shape
+        raw = np.asarray(profile, dtype=object)
+    except (TypeError, ValueError):
+        raw = np.empty(0, dtype=object)
+    if raw.ndim != 2 or raw.shape[1] != 2 or raw.shape[0] < 2:
+        raise ValueError(pairs)
+    for i, row in enumerate(raw.tolist()):
+        for part, value in zip(("time", "power"), row, strict=True):
+            number = real_number(value)
+            if number is None:
+                raise ValueError(
+                    f"{pairs} of real numbers (not bools or strings), "
+                    f"got {type(value).__name__} {shown(value)} as the {part} of pair {i}"
+                )
+            if not math.isfinite(number):  # an int beyond a float is inf here
+                raise ValueError(f"profile {part} must be finite, got {shown(value)} in pair {i}")
+    return np.asarray(profile, dtype=float)  # converted as before the checks: the same floats
+
+
 def power_profile(profile: Sequence[tuple[float, float]], dt: float) -> np.ndarray:
     """Commanded power per sample, % (piecewise linear through the breakpoints)."""
-    try:
-        points = np.asarray(profile, dtype=float)
-    except (TypeError, ValueError, OverflowError):  # not numbers, ragged, an int beyond a float
-        points = np.empty(0)
-    if points.ndim != 2 or points.shape[1] != 2 or points.shape[0] < 2:
-        raise ValueError("profile must be a list of at least two (time s, power %) pairs")
-    if not np.all(np.isfinite(points)) or points[0, 0] != 0.0 or np.any(np.diff(points[:, 0]) <= 0):
+    points = _profile_points(profile)
+    if points[0, 0] != 0.0 or np.any(np.diff(points[:, 0]) <= 0):
         raise ValueError("profile times must start at 0 and increase")
     if points[:, 1].min() < POWER_RANGE[0] or points[:, 1].max() > POWER_RANGE[1]:
         raise ValueError(f"profile power must stay within {POWER_RANGE[0]:g}-{POWER_RANGE[1]:g} %")

@@ -115,6 +115,15 @@ def _floats(values: Iterable[Any], action: Any, name: str = "action") -> list[fl
     return floats
 
 
+def _unmasked(array: np.ma.MaskedArray, expected: str) -> np.ndarray:
+    """A masked array's data, or ValueError if an element is masked: a masked element has no
+    value (its ``tolist`` is None, its data whatever lies beneath), so no action can be read."""
+    masked = int(np.ma.getmaskarray(array).sum())
+    if masked:
+        raise ValueError(f"{expected}, got a masked array with {masked} masked element(s) of {array.size}")
+    return array.data
+
+
 def action_floats(action: Any, n: int, meaning: str) -> list[float]:
     """A scalar env's action, other than a float array of shape ``(n,)`` (the step's fast path),
     as ``n`` Python floats: a real (float or integer) array of shape ``(n,)``, or a list or tuple
@@ -125,9 +134,12 @@ def action_floats(action: Any, n: int, meaning: str) -> list[float]:
     ActionTypeError
         Not real numbers (a TypeError, and a ValueError).
     ValueError
-        Not ``n`` of them, or an integer too large for a float.
+        Not ``n`` of them, an integer too large for a float, or a masked array with a masked
+        element (one whose mask is all False is its data).
     """
     expected = f"action must be {n} number{'s' if n > 1 else ''} ({meaning})"
+    if isinstance(action, np.ma.MaskedArray):
+        action = _unmasked(action, expected)
     if isinstance(action, np.ndarray):
         if action.dtype.kind not in REAL_KINDS:
             raise ActionTypeError(f"{expected}, a real array, got an array of dtype {action.dtype}")
@@ -167,8 +179,11 @@ def batch_actions(actions: Any) -> np.ndarray:
         Not real numbers: complex, bool (alone or among numbers), strings or other objects (numpy
         would drop an imaginary part, read "0.5" as 0.5, or True as 1).
     ValueError
-        A ragged nesting, or an integer too large for a float.
+        A ragged nesting, an integer too large for a float, or a masked array with a masked
+        element (one whose mask is all False is its data).
     """
+    if isinstance(actions, np.ma.MaskedArray):
+        actions = _unmasked(actions, "actions must be a float array of shape (num_envs, actions)")
     try:
         array = actions if isinstance(actions, np.ndarray) else np.asarray(actions)
     except ValueError:

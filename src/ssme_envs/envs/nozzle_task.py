@@ -155,9 +155,7 @@ def episode_options(
     noise_std (rad) and fault."""
     check_reference(reference)
     amplitude = check_number("reference_amplitude_deg", amplitude_deg, 0.0, max_amplitude_deg)
-    parsed = Fault.parse(fault, 1, 1)
-    if parsed is not None and parsed.kind not in NOZZLE_FAULTS:
-        raise ValueError(f"unknown fault kind {parsed.kind!r}; choose one of {NOZZLE_FAULTS}")
+    parsed = Fault.parse(fault, 1, 1, kinds=NOZZLE_FAULTS)
     return {
         "horizon": round(check_number("episode_seconds", seconds, 0.1, MAX_EPISODE_SECONDS) / dt),
         "reference": reference,

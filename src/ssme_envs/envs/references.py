@@ -8,14 +8,14 @@ the uniforms and the steps before it alone), so a prefix equals the same steps o
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from functools import cache
 from typing import Any, NamedTuple
 
 import numpy as np
 
-from ssme_envs.envs.task import MAX_EPISODE_SECONDS, Uniforms, real_number, shown
+from ssme_envs.envs.task import MAX_EPISODE_SECONDS, Uniforms, check_keys, real_number, shown
 
 REFERENCE_KINDS = ("random_steps", "step", "ramp", "prbs", "sine_sweep", "attitude", "zero", "mixed")
 # what a "mixed" episode draws from, with equal probability
@@ -254,27 +254,30 @@ class Fault:
     magnitude: float = 0.0
 
     @classmethod
-    def parse(cls, spec: Mapping[str, Any] | Fault | None, n_valves: int, n_outputs: int) -> Fault | None:
-        """A Fault from a dict like ``{"kind": "sensor_bias", "time": 4, "index": 0, "magnitude": 0.005}``."""
+    def parse(
+        cls,
+        spec: Mapping[str, Any] | Fault | None,
+        n_valves: int,
+        n_outputs: int,
+        kinds: Sequence[str] = FAULT_KINDS,
+    ) -> Fault | None:
+        """A Fault from a dict like ``{"kind": "sensor_bias", "time": 4, "index": 0, "magnitude": 0.005}``
+        (or a Fault, checked), or None; ``kinds``: the kinds the env takes (a subset of
+        :data:`FAULT_KINDS`), the only ones its messages offer. ValueError naming the bad field."""
         if spec is None or isinstance(spec, Fault):
             fault = spec
         elif isinstance(spec, Mapping):
-            unknown = sorted(set(spec) - {"kind", "time", "index", "magnitude"})
-            if unknown:
-                raise ValueError(f"fault: unknown key(s) {', '.join(unknown)}")
+            check_keys("fault", spec, ("kind", "time", "index", "magnitude"))
             if "kind" not in spec or "time" not in spec:
                 raise ValueError("fault needs 'kind' and 'time'")
             defaults = {"stuck_valve": 0.0, "sensor_bias": 0.005, "gain_loss": 0.5}
-            kind = spec["kind"]
-            if kind not in FAULT_KINDS:
-                raise ValueError(f"unknown fault kind {kind!r}; choose one of {', '.join(FAULT_KINDS)}")
+            kind = _fault_kind(spec["kind"], kinds)
             fault = cls(kind, spec["time"], spec.get("index", 0), spec.get("magnitude", defaults[kind]))
         else:
             raise ValueError(f"fault must be a dict or None, got {type(spec).__name__}")
         if fault is None:
             return None
-        if fault.kind not in FAULT_KINDS:
-            raise ValueError(f"unknown fault kind {fault.kind!r}; choose one of {', '.join(FAULT_KINDS)}")
+        _fault_kind(fault.kind, kinds)
         time = real_number(fault.time)
         if time is None or not 0.0 <= time <= MAX_FAULT_TIME:  # NaN fails the comparisons
             raise ValueError(
@@ -300,6 +303,18 @@ class Fault:
                 f"gain_loss magnitude is the remaining gain, within 0-1, got {shown(fault.magnitude)}"
             )
         return cls(fault.kind, time, int(index), magnitude)  # numpy numbers as Python ones
+
+
+def _fault_kind(kind: Any, kinds: Sequence[str]) -> str:
+    """``kind`` if it is one of ``kinds``, else ValueError listing them. A str is checked first:
+    ``in`` on an array compares elementwise (a 1-element array passed, then failed as a dict key)."""
+    if not isinstance(kind, str):
+        raise ValueError(
+            f"fault kind must be a str, one of {', '.join(kinds)}; got {type(kind).__name__} {shown(kind)}"
+        )
+    if kind not in kinds:
+        raise ValueError(f"unknown fault kind {kind!r}; choose one of {', '.join(kinds)}")
+    return kind
 
 
 def unit_normals(uniforms: np.ndarray) -> np.ndarray:

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, NamedTuple, Protocol, runtime_checkable
 
@@ -266,6 +266,20 @@ def real_number(value: Any) -> float | None:
         return math.inf if value > 0 else -math.inf
 
 
+def check_keys(name: str, spec: Mapping[Any, Any], accepted: Sequence[str], noun: str = "key") -> None:
+    """ValueError when the dict option ``name`` has keys outside ``accepted``, naming them.
+
+    Keys of any type are shown by their repr, in the dict's order (a dict may mix ints and
+    strings, which neither sort together nor join as text); only strings are accepted.
+    """
+    unknown = [key for key in spec if not (isinstance(key, str) and key in accepted)]
+    if unknown:
+        raise ValueError(
+            f"{name}: unknown {noun}(s) {', '.join(map(shown, unknown))}; "
+            f"it takes {', '.join(map(repr, accepted))}"
+        )
+
+
 def check_number(name: str, value: Any, low: float, high: float, low_open: bool = False) -> float:
     """``value`` as a float, or ValueError unless a finite real number (numpy's included, not a
     bool) within [low, high] (or (low, high])."""
@@ -306,6 +320,7 @@ __all__ = [
     "Schedule",
     "TrackingTask",
     "Uniforms",
+    "check_keys",
     "check_number",
     "check_numbers",
     "envelope_penalty",

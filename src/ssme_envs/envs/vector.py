@@ -215,7 +215,8 @@ class TrackingVectorEnv(VectorEnv):
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """One step of every sub-env; (observations, rewards, terminated, truncated, infos)."""
         acts = actions  # float32 or float64 as given: cast once, into the clipped rows below
-        if not isinstance(acts, np.ndarray) or acts.dtype not in _FLOATS:
+        # exactly ndarray: a subclass (a masked array) goes through the checks, which read its mask
+        if type(acts) is not np.ndarray or acts.dtype not in _FLOATS:
             acts = batch_actions(actions)  # real numbers only: not complex, bools or strings
         shape = (self.num_envs, self.task.n_actions)
         if acts.shape != shape:
