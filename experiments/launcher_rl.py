@@ -7,9 +7,9 @@ zero,pid,lqi,robust,ppo,ppo:residual --episodes 20`` (seed 0) measures them.
 
 Reads agents/policies/LauncherPitch-v0/ (config.toml, training.json and the policy) and
 agents/policies/LauncherPitch-v0-residual/ (the policy and its base), and the SAC and TD3 runs
-tried beside it where experiments/runs/<config name>/ holds them (``ssme-envs train --config
-experiments/configs/sac_launcher_pitch.toml --out experiments/runs/sac_launcher_pitch``, not
-shipped; the section names those it left out), and writes its section, "## LauncherPitch-v0", at
+tried beside it, kept in experiments/tried/<config name>/ (``ssme-envs train --config
+experiments/configs/sac_launcher_pitch.toml --out experiments/tried/sac_launcher_pitch``; the
+section names those it finds missing), and writes its section, "## LauncherPitch-v0", at
 the end of experiments/results/rl_training.md (replacing an earlier one).
 experiments/train_policies.py rewrites that file without it: run this after.
 """
@@ -117,7 +117,7 @@ def section() -> str:
             f"the {s['kept']['model']} policy kept ({s['kept']['steps']:,} steps)"
             for algo, s in tried.items()
         )
-        lines += ["", f"Tried beside PPO, not shipped (their runs in experiments/runs/): {runs}."]
+        lines += ["", f"Tried beside PPO (their kept policies in experiments/tried/): {runs}."]
     missing = missing_note(missing_runs(ENV_ID))
     lines += ["", *missing[:-1]] if missing else []
     lines += [

@@ -91,7 +91,7 @@ def main() -> None:
         "",
         f"Command: `python experiments/learned_vs_classical.py --episodes {args.episodes}` (seed {SEED}, the "
         "same episodes for every controller; every scenario of each env, the main report's classical "
-        "controllers and every shipped policy of the env; the runs tried beside them, not shipped, "
+        "controllers and every shipped policy of the env; the runs tried beside them (experiments/tried/) "
         "appear in the cost tables only: SAC, TD3, and `ppo:penalty`, NozzleTVC's residual trained with "
         "residual_penalty = 1.0).",
         "",
@@ -115,8 +115,9 @@ def main() -> None:
     tried = [(e, a, r) for e in evaluations for a, r in tried_runs(e).items()]
     if tried:
         lines += [
-            "Tried, not shipped (configs in experiments/configs/; the runs, in experiments/runs/, are not "
-            f"in the repository: `{REMAKE}` remakes one):",
+            "Tried beside them (configs in experiments/configs/; each run's kept policy and training "
+            f"record in experiments/tried/NAME/, not a controller of the package; `{REMAKE}` trains one "
+            "again, RL training being chaotic, to a policy of its own: see experiments/tried/README.md):",
             "",
         ]
         for env_id, algo, run in tried:
