@@ -14,6 +14,7 @@ import gymnasium as gym
 import numpy as np
 
 from ssme_envs.envs.task import real_number, shown
+from ssme_envs.models.linear import holds_bool
 
 REAL_KINDS = "fiu"  # numpy dtype kinds of real numbers: bool, complex, strings and objects are not
 
@@ -159,16 +160,6 @@ def action_floats(action: Any, n: int, meaning: str) -> list[float]:
     return floats
 
 
-def _holds_bool(values: Iterable[Any]) -> bool:
-    """Whether nested lists or tuples hold a bool (Python's or numpy's, or a bool array)."""
-    for value in values:
-        if isinstance(value, bool | np.bool_) or (isinstance(value, np.ndarray) and value.dtype.kind == "b"):
-            return True
-        if isinstance(value, list | tuple) and _holds_bool(value):
-            return True
-    return False
-
-
 def batch_actions(actions: Any) -> np.ndarray:
     """A vector env's actions, other than a float32 or float64 array (the step's fast path), as
     float64: a real (float or integer) array, or nested lists of real numbers.
@@ -196,7 +187,7 @@ def batch_actions(actions: Any) -> np.ndarray:
         if floats is not None:
             return np.array(floats, dtype=np.float64).reshape(array.shape)
     elif array.dtype.kind in REAL_KINDS:
-        if not isinstance(actions, list | tuple) or not _holds_bool(actions):  # numpy reads bools as 0, 1
+        if not isinstance(actions, list | tuple) or not holds_bool(actions):  # numpy reads bools as 0, 1
             return array.astype(np.float64)
         what = f"a {type(actions).__name__} holding bools"
     raise ActionTypeError(

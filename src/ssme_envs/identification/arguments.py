@@ -17,7 +17,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from ssme_envs.identification.structure import check_search_length
-from ssme_envs.models.linear import check_dt, describe
+from ssme_envs.models.linear import check_dt, describe, holds_bool
 
 REAL_KINDS = "fiu"  # numpy dtype kinds of real numbers: bool, complex, strings and objects are not
 METHODS = ("iv", "ls")
@@ -45,16 +45,6 @@ class Arguments(NamedTuple):
 def _shown(value: Any) -> str:
     """``value`` for a message: its type, then its (shortened) repr."""
     return f"{type(value).__name__} {describe(value)}"
-
-
-def _holds_bool(values: Iterable[Any]) -> bool:
-    """Whether nested lists or tuples hold a bool: numpy reads ``[True, 0.5]`` as ``[1.0, 0.5]``."""
-    for value in values:
-        if isinstance(value, bool | np.bool_) or (isinstance(value, np.ndarray) and value.dtype.kind == "b"):
-            return True
-        if isinstance(value, list | tuple) and _holds_bool(value):
-            return True
-    return False
 
 
 def _is_real(value: Any) -> bool:
@@ -89,7 +79,7 @@ def _record(value: Any, name: str, channels: str) -> np.ndarray:
             raise ValueError(f"{expected}, got {what}: an integer too large for a float") from None
     elif array.dtype.kind not in REAL_KINDS:
         raise ArgumentTypeError(f"{expected}, got {what}")
-    elif isinstance(value, list | tuple) and _holds_bool(value):
+    elif isinstance(value, list | tuple) and holds_bool(value):
         raise ArgumentTypeError(f"{expected}, got a {type(value).__name__} holding bools")
     if array.ndim not in (1, 2):
         raise ValueError(

@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 import numbers
 import reprlib
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -247,6 +248,17 @@ class StateSpace(Dimensions):
         object.__setattr__(self, "dt", check_dt(self.dt))
 
 
+def holds_bool(values: Iterable[Any]) -> bool:
+    """Whether nested lists or tuples hold a bool (Python's or numpy's, or a bool array): numpy
+    reads ``[True, 0.5]`` as ``[1.0, 0.5]``, so a check of numbers looks for them first."""
+    for value in values:
+        if isinstance(value, bool | np.bool_) or (isinstance(value, np.ndarray) and value.dtype.kind == "b"):
+            return True
+        if isinstance(value, list | tuple) and holds_bool(value):
+            return True
+    return False
+
+
 __all__ = [
     "Dimensions",
     "PlantMatrices",
@@ -257,6 +269,7 @@ __all__ = [
     "check_dt",
     "describe",
     "finite_float",
+    "holds_bool",
     "non_number_at",
     "refuse_non_numbers",
     "refuse_unknown_keys",
