@@ -255,6 +255,27 @@ def test_bad_records(short_record, change, message):
         dsr_e(u, y, dt=0.04)
 
 
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        (lambda u, y: (u + 1j * u, y), "u must be real numbers.*complex128"),
+        (lambda u, y: (u, y > 0), "y must be real numbers.*bool"),
+        (
+            lambda u, y: (np.ma.masked_array(u, mask=np.arange(u.size).reshape(u.shape) == 7), y),
+            "u has 1 masked",
+        ),
+    ],
+)
+def test_records_that_are_not_real_numbers_are_refused_as_identify_refuses_them(
+    short_record, change, message
+):
+    """The records' kind is checked where every identifier reads them: DSR_e cut a complex record
+    to its real part (with a warning) and read beneath a mask."""
+    u, y = change(*short_record)
+    with pytest.raises(ValueError, match=message):
+        dsr_e(u, y, dt=0.04)
+
+
 def test_static_system_has_no_state():
     u = np.random.default_rng(2).standard_normal((500, 1))
     with pytest.raises(ValueError, match="no dynamics"):

@@ -41,7 +41,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ssme_envs.identification.alpha_fit import _binary_amplitudes, _Fit, _fit, _input_features
-from ssme_envs.identification.arguments import check_arguments
+from ssme_envs.identification.arguments import check_arguments, real_record
 from ssme_envs.identification.covariance import parameter_uncertainty
 from ssme_envs.identification.output_error import held_out_criterion, refine_contenders
 from ssme_envs.identification.records import check_magnitudes
@@ -85,12 +85,14 @@ def check_record(
     Raises
     ------
     ValueError
-        Naming the problem: shapes, NaN/inf or values whose squares overflow
+        Naming the problem: not real numbers (:func:`~ssme_envs.identification.arguments.real_record`:
+        complex, bool, text, masked values), shapes, NaN/inf or values whose squares overflow
         (:func:`~ssme_envs.identification.records.check_magnitudes`), constant or linearly
         dependent signals.
     """
-    u = np.asarray(u, dtype=float)
-    y = np.asarray(y, dtype=float)
+    # real numbers of the right shape first, for every identifier (DSR_e and the joint fit too)
+    u = np.asarray(real_record(u, "u", "inputs"), dtype=float)
+    y = np.asarray(real_record(y, "y", "outputs"), dtype=float)
     u = u[:, None] if u.ndim == 1 else u
     y = y[:, None] if y.ndim == 1 else y
     if u.ndim != 2 or y.ndim != 2:

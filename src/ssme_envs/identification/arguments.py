@@ -51,7 +51,7 @@ def _is_real(value: Any) -> bool:
     return isinstance(value, numbers.Real) and not isinstance(value, bool | np.bool_)
 
 
-def _record(value: Any, name: str, channels: str) -> np.ndarray:
+def real_record(value: Any, name: str, channels: str) -> np.ndarray:
     """``value`` as an array of real numbers, shape (T,) or (T, k) with k >= 1, else an error
     naming ``name``; ``channels`` ("inputs", "outputs") says what its columns are."""
     expected = f"{name} must be real numbers (an int or float array of shape (samples, {channels}))"
@@ -61,7 +61,7 @@ def _record(value: Any, name: str, channels: str) -> np.ndarray:
         if masked:
             raise ValueError(
                 f"{name} has {masked} masked value{'s' if masked > 1 else ''} of {value.size}: fill or "
-                "cut out the masked samples first (identify does not read a mask)"
+                "cut out the masked samples first (the identifiers do not read a mask)"
             )
     try:
         array = np.asarray(value)
@@ -199,8 +199,8 @@ def check_arguments(
     _flag(uncertainty, "uncertainty")
     _max_index(max_index)
     _rank_tol(rank_tol)
-    u = _record(u, "u", "inputs")
-    y = _record(y, "y", "outputs")
+    u = real_record(u, "u", "inputs")
+    y = real_record(y, "y", "outputs")
     if u.shape[0] != y.shape[0]:  # check_record's words, kept
         raise ValueError(
             f"u and y must have a row per sample: inputs have {u.shape[0]} samples but outputs "
@@ -223,4 +223,4 @@ def check_arguments(
     return Arguments(u, y, dt, indices, in_names, out_names)
 
 
-__all__ = ["ArgumentTypeError", "Arguments", "check_arguments"]
+__all__ = ["ArgumentTypeError", "Arguments", "check_arguments", "real_record"]

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 
+from ssme_envs.identification.arguments import real_record
 from ssme_envs.models.linear import Dimensions, StateSpace, check_dt
 
 
@@ -63,13 +64,13 @@ class InnovationsModel(Dimensions):
             filter ``x+ = A x + B u + K (y - C x - D u)``, ``y_hat = C x + D u``; otherwise the
             pure simulation ``x+ = A x + B u``. Both start from the zero state.
         """
-        u = _as_columns(u, "u")
+        u = _as_columns(u, "u", "inputs")
         if u.shape[1] != self.n_inputs:
             raise ValueError(f"u has {u.shape[1]} channels but the model has {self.n_inputs} inputs")
         if y is None:
             a, b_in, inputs = self.A, self.B, u
         else:
-            y = _as_columns(y, "y")
+            y = _as_columns(y, "y", "outputs")
             if y.shape != (u.shape[0], self.n_outputs):
                 raise ValueError(f"y has shape {y.shape}, expected {(u.shape[0], self.n_outputs)}")
             a = self.A - self.K @ self.C
@@ -111,12 +112,12 @@ class SubspaceResult:
     future_horizon: int
 
 
-def _as_columns(x: np.ndarray, name: str) -> np.ndarray:
-    x = np.asarray(x, dtype=float)
-    x = x[:, None] if x.ndim == 1 else x
-    if x.ndim != 2:
-        raise ValueError(f"{name} must have shape (samples, channels), got {x.shape}")
-    return x
+def _as_columns(x: np.ndarray, name: str, channels: str) -> np.ndarray:
+    """``x`` as a float (samples, channels) array; real numbers only, as ``identify`` takes them
+    (:func:`~ssme_envs.identification.arguments.real_record`: a complex record is not cut to its
+    real part)."""
+    x = np.asarray(real_record(x, name, channels), dtype=float)
+    return x[:, None] if x.ndim == 1 else x
 
 
 def to_continuous(model: InnovationsModel) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

@@ -284,9 +284,7 @@ def dsr_e(
     past_horizon = _positive_int(past_horizon, "past_horizon")
     future_horizon = _positive_int(future_horizon, "future_horizon")
     max_order = _positive_int(max_order, "max_order")
-    u, y = _as_columns(u, "u"), _as_columns(y, "y")
-    if u.shape[1] == 0 or y.shape[1] == 0:
-        raise ValueError("at least one input and one output are needed")
+    u, y = _as_columns(u, "u", "inputs"), _as_columns(y, "y", "outputs")
     u, y = check_record(u, y)
     n_samples, m = u.shape
     p = y.shape[1]
