@@ -114,7 +114,9 @@ def parse_controller(spec: str, env_id: str, allow_pickle: bool = False) -> Call
     """
     if not isinstance(spec, str):
         raise TypeError(f"a controller spec is a string such as 'lqi' or 'ppo:RUN_DIR', got {spec!r}")
-    name, _, design = spec.partition(":")
+    name, colon, design = spec.partition(":")
+    if colon and not design:
+        raise ValueError(f"controller spec {spec!r} names nothing after ':'; write {name!r} or {name}:DESIGN")
     if name in ALGOS and design and design not in (*DESIGN_SOURCES, *POLICY_VARIANTS):
         return _trained(name, design, env_id, allow_pickle)
     valid = controller_names(env_id)

@@ -192,4 +192,7 @@ def test_unknown_names_list_the_valid_ones():
         parse_controller("lqr", TRACKING)
     with pytest.raises(ValueError, match="identified, truth"):
         parse_controller("lqi:paper", TRACKING)
+    for spec in ("zero:", "ppo:", "lqi:"):
+        with pytest.raises(ValueError, match="names nothing after ':'"):
+            parse_controller(spec, TRACKING)
     assert "hysteresis" in controller_names(NOZZLE) and "hysteresis" not in controller_names(TRACKING)

@@ -17,7 +17,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from ssme_envs.cli_checks import check_episodes
+from ssme_envs.cli_checks import check_episodes, integer, number
 from ssme_envs.script_options import (
     comma_choices,
     episodes_within_memory,
@@ -306,3 +306,21 @@ def test_episodes_within_memory_holds_to_the_evaluate_commands_check() -> None:
     assert str(refused.value).startswith(f"--episodes {10**15} needs about ")
     with pytest.raises(argparse.ArgumentTypeError, match="must be at least 1, got 0"):
         convert("0")
+
+
+@given(st.floats(allow_nan=False, allow_infinity=False), st.sampled_from(["{!r}", "{:e}", "{:.17g}", "{:f}"]))
+def test_number_options_read_decimal_text_as_float_does(value, form):
+    text = form.format(value)
+    assert number(text) == float(text)
+
+
+@given(st.integers(), st.integers(min_value=1, max_value=30))
+def test_options_refuse_python_literal_forms_that_a_csv_would_not_hold(value, cut):
+    digits = str(abs(value)) + "0"
+    assert integer(str(value)) == value
+    spaced = digits[: cut % len(digits) or 1] + "_" + digits[cut % len(digits) or 1 :]
+    for text in (spaced, "0x" + digits, "\u0663" + digits):  # \u0663: an Arabic-Indic digit
+        with pytest.raises(ValueError):
+            integer(text)
+        with pytest.raises(ValueError):
+            number(text)

@@ -22,7 +22,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import NoReturn
 
-from ssme_envs.cli_checks import error_line, one_line, sigint_in_main_process
+from ssme_envs.cli_checks import error_line, integer, number, one_line, sigint_in_main_process
 from ssme_envs.cli_commands import UsageError as _UsageError
 from ssme_envs.cli_commands import bench_command as _bench
 from ssme_envs.cli_commands import evaluate_choices as _evaluate_choices
@@ -97,21 +97,21 @@ def build_parser() -> argparse.ArgumentParser:
         "--inputs", default="beta_opov,beta_fpov", help="input columns (default: %(default)s)"
     )
     engine.add_argument("--outputs", default="pc,mr", help="output columns (default: %(default)s)")
-    engine.add_argument("--dt", type=float, help="sample time in s, if the CSV has no 't' column")
+    engine.add_argument("--dt", type=number, help="sample time in s, if the CSV has no 't' column")
     engine.add_argument("--validate", type=Path, help="a second CSV record to validate on")
     engine.add_argument("--indices", help="observability indices, e.g. 2,2 (default: estimated)")
     engine.add_argument(
-        "--max-index", type=int, default=6, help="largest index searched (default: %(default)s)"
+        "--max-index", type=integer, default=6, help="largest index searched (default: %(default)s)"
     )
     engine.add_argument(
-        "--rank-tol", type=float, default=0.1, help="rank-search threshold (default: %(default)s)"
+        "--rank-tol", type=number, default=0.1, help="rank-search threshold (default: %(default)s)"
     )
     engine.add_argument(
         "--method", choices=("iv", "ls"), default="iv", help="parameter estimator (default: %(default)s)"
     )
     engine.add_argument("--symmetric", action="store_true", help="do not estimate the lambda gains")
     engine.add_argument(
-        "--seed", type=int, default=None, help="seed of the embedded experiment (default: 2024)"
+        "--seed", type=integer, default=None, help="seed of the embedded experiment (default: 2024)"
     )
 
     nozzle = plants.add_parser(
@@ -127,15 +127,17 @@ def build_parser() -> argparse.ArgumentParser:
     nozzle.add_argument("--out", type=Path, required=True, help="output directory")
     nozzle.add_argument("--input", default="tau", help="torque column, N m (default: %(default)s)")
     nozzle.add_argument("--output", default="beta", help="angle column, rad (default: %(default)s)")
-    nozzle.add_argument("--dt", type=float, help="sample time in s, if the CSV has no 't' column")
+    nozzle.add_argument("--dt", type=number, help="sample time in s, if the CSV has no 't' column")
     nozzle.add_argument("--validate", type=Path, help="a second CSV record to validate on")
-    nozzle.add_argument("--workers", type=int, default=2, help="processes for the fit (default: %(default)s)")
     nozzle.add_argument(
-        "--seed", type=int, default=None, help="seed of the bench test and of the search (default: 7)"
+        "--workers", type=integer, default=2, help="processes for the fit (default: %(default)s)"
+    )
+    nozzle.add_argument(
+        "--seed", type=integer, default=None, help="seed of the bench test and of the search (default: 7)"
     )
     nozzle.add_argument(
         "--normalization-a",
-        type=float,
+        type=number,
         default=0.35,
         help="the A that fixes the Table 1 form (default: %(default)s)",
     )
@@ -149,7 +151,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     bench.add_argument(
         "--rounds",
-        type=int,
+        type=integer,
         default=5,
         help="alternating rounds per measurement, one episode each; the best counts (default: %(default)s)",
     )
@@ -187,10 +189,10 @@ def build_parser() -> argparse.ArgumentParser:
         "execute arbitrary code (use only for files you trust)",
     )
     evaluate.add_argument("--scenario", help="comma-separated scenario names (default: all of the env's)")
-    evaluate.add_argument("--episodes", type=int, help="episodes per scenario (default: 20)")
+    evaluate.add_argument("--episodes", type=integer, help="episodes per scenario (default: 20)")
     evaluate.add_argument(
         "--monte-carlo",
-        type=int,
+        type=integer,
         metavar="N",
         help="robustness: run each controller over N plants drawn per episode with --plant-spread "
         "(NozzleTVC, LauncherPitch) and write robustness.md (mean, worst case, CVaR 90 %% per "
@@ -209,7 +211,7 @@ def build_parser() -> argparse.ArgumentParser:
         "names (e.g. identified) or a model.json (default: each scenario's)",
     )
     evaluate.add_argument(
-        "--seed", type=int, default=0, help="seed of the first episode (default: %(default)s)"
+        "--seed", type=integer, default=0, help="seed of the first episode (default: %(default)s)"
     )
     evaluate.add_argument("--out", type=Path, required=True, help="output directory")
 
@@ -226,7 +228,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     report.add_argument("--out", type=Path, required=True, help="output directory")
     report.add_argument(
-        "--episodes", type=int, default=20, help="episodes per scenario (default: %(default)s)"
+        "--episodes", type=integer, default=20, help="episodes per scenario (default: %(default)s)"
     )
 
     check = commands.add_parser(
@@ -255,7 +257,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="CSV record(s); repeat --data or list several",
     )
     check_engine.add_argument("--out", type=Path, required=True, help="output directory")
-    check_engine.add_argument("--dt", type=float, help="sample time in s, if the CSV has no 't' column")
+    check_engine.add_argument("--dt", type=number, help="sample time in s, if the CSV has no 't' column")
     for action in commands._choices_actions:  # a command without a description shows its help line
         sub = commands.choices[action.dest]
         sub.description = sub.description or action.help

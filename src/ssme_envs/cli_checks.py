@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 import signal
 import sys
 from collections.abc import Iterator, Sequence
@@ -28,6 +29,33 @@ TRANSIENT_COPIES = 3
 ENV_BYTES_PER_STEP = 96
 WORKER_BYTES = 150 * 2**20  # one process of the nozzle fit's pools: interpreter, numpy, scipy
 MEMORY_SHARE = 0.8  # of the available memory a run may plan to use
+
+
+_INTEGER = re.compile(r"[+-]?[0-9]+")
+_NUMBER = re.compile(
+    r"[+-]?([0-9]+\.?[0-9]*|\.[0-9]+)([eE][+-]?[0-9]+)?|[+-]?(nan|inf|infinity)", re.IGNORECASE
+)
+
+
+def integer(text: str) -> int:
+    """An integer option's value, read as written: Python's ``int()`` would also read ``1_0`` as
+    10 and other scripts' digits; ValueError otherwise (argparse names the option)."""
+    if not _INTEGER.fullmatch(text.strip()):
+        raise ValueError(text)
+    return int(text)
+
+
+def number(text: str) -> float:
+    """A real option's value in decimal notation (``nan`` and ``inf`` are read, and refused by the
+    option's own check with its name); ValueError for ``1_0``, ``0x1p-3`` and the like."""
+    if not _NUMBER.fullmatch(text.strip()):
+        raise ValueError(text)
+    return float(text)
+
+
+# argparse names the kind it expected from the converter's name: "invalid int value: 'x'"
+integer.__name__ = "int"
+number.__name__ = "float"
 
 
 def check_finite(option: str, value: float | None, positive: bool = False) -> None:
@@ -140,7 +168,7 @@ def evaluation_bytes(env_id: str, pairs: int) -> float:
 def positive_integers(option: str, text: str) -> tuple[int, ...]:
     """The value of an option of comma-separated positive integers; ValueError naming it."""
     try:
-        values = tuple(int(v) for v in text.split(","))
+        values = tuple(integer(v) for v in text.split(","))
     except ValueError:
         raise ValueError(f"{option} must be comma-separated positive integers, got {text!r}") from None
     if any(v < 1 for v in values):
@@ -256,6 +284,8 @@ __all__ = [
     "check_workers",
     "error_line",
     "evaluation_bytes",
+    "integer",
+    "number",
     "one_line",
     "os_error_text",
     "sigint_in_main_process",

@@ -74,7 +74,7 @@ def identify_engine(args: argparse.Namespace) -> int:
         "max_index": args.max_index,
         "rank_tol": args.rank_tol,
     }
-    if args.indices:
+    if args.indices is not None:
         options["indices"] = indices(args.indices)
     if args.data is None:
         _needs_data(args, ("validate", "dt", "indices"), "experiment")

@@ -7,7 +7,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from ssme_envs.cli_checks import check_training
+from ssme_envs.cli_checks import check_training, integer
 from ssme_envs.outputs import check_file_target
 
 
@@ -22,11 +22,11 @@ def add_learning_commands(commands: Any) -> None:
     train.add_argument("--algo", help="ppo, sac or td3 (or 'algo' in the config)")
     train.add_argument(
         "--steps",
-        type=int,
+        type=integer,
         help="environment steps, rounded up to whole rollouts (a line says so) (default: the config's, "
         "else 200000)",
     )
-    train.add_argument("--seed", type=int, help="seed (default: the config's, else 0)")
+    train.add_argument("--seed", type=integer, help="seed (default: the config's, else 0)")
     train.add_argument("--config", type=Path, help="TOML config (hyperparameters, env options, ...)")
     train.add_argument("--tensorboard", action="store_true", help="write TensorBoard logs under --out")
     train.add_argument("--out", type=Path, required=True, help="output directory")
@@ -49,20 +49,28 @@ def add_learning_commands(commands: Any) -> None:
         "(sqlite:///study.db, postgresql://user:password@host/db, mysql+pymysql://...)",
     )
     tune.add_argument("--study", required=True, help="study name; created by the first worker")
-    tune.add_argument("--trials", type=int, default=10, help="this worker's trials (default: %(default)s)")
     tune.add_argument(
-        "--timesteps", type=int, default=100_000, help="environment steps per trial (default: %(default)s)"
+        "--trials", type=integer, default=10, help="this worker's trials (default: %(default)s)"
     )
     tune.add_argument(
-        "--seed", type=int, default=0, help="seed of this worker's sampler and training; give each "
+        "--timesteps",
+        type=integer,
+        default=100_000,
+        help="environment steps per trial (default: %(default)s)",
+    )
+    tune.add_argument(
+        "--seed", type=integer, default=0, help="seed of this worker's sampler and training; give each "
         "worker its own (default: %(default)s)",
     )  # fmt: skip
-    tune.add_argument("--num-envs", type=int, help="parallel envs in training (default: train's)")
+    tune.add_argument("--num-envs", type=integer, help="parallel envs in training (default: train's)")
     tune.add_argument(
-        "--evaluations", type=int, default=4, help="evaluations per trial, for pruning (default: %(default)s)"
+        "--evaluations",
+        type=integer,
+        default=4,
+        help="evaluations per trial, for pruning (default: %(default)s)",
     )
     tune.add_argument(
-        "--eval-episodes", type=int, default=10, help="episodes per evaluation (default: %(default)s)"
+        "--eval-episodes", type=integer, default=10, help="episodes per evaluation (default: %(default)s)"
     )
     tune.add_argument("--out", type=Path, help="write the best trial's config (TOML) to this file")
 

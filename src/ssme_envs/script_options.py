@@ -13,7 +13,7 @@ from collections.abc import Callable, Collection, Mapping
 from pathlib import Path
 from typing import NoReturn
 
-from ssme_envs.cli_checks import check_episodes, one_line
+from ssme_envs.cli_checks import check_episodes, integer, number, one_line
 
 
 class _ScriptParser(argparse.ArgumentParser):
@@ -71,7 +71,7 @@ def int_within(low: int, high: int | None = None) -> Callable[[str], int]:
 
     def convert(text: str) -> int:
         try:
-            value = int(text)
+            value = integer(text)
         except ValueError:
             raise argparse.ArgumentTypeError(
                 f"must be an integer {_bounds(low, high)}, got {text!r}"
@@ -100,7 +100,7 @@ def float_within(low: float, high: float | None = None) -> Callable[[str], float
 
     def convert(text: str) -> float:
         try:
-            value = float(text)
+            value = number(text)
         except ValueError:
             value = math.nan
         if not (math.isfinite(value) and low <= value and (high is None or value <= high)):
