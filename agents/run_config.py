@@ -145,7 +145,7 @@ def config_toml(config: dict[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def plan_steps(config: dict[str, Any]) -> tuple[int, dict[str, Any], str | None]:
+def plan_steps(config: dict[str, Any], source: str = "config") -> tuple[int, dict[str, Any], str | None]:
     """The steps SB3 will train, the hyperparameters and a note when they differ from ``steps``.
 
     SB3 trains in whole collections: PPO in rollouts of ``n_steps`` per env, SAC and TD3 in
@@ -157,6 +157,8 @@ def plan_steps(config: dict[str, Any]) -> tuple[int, dict[str, Any], str | None]
     ----------
     config : dict
         A checked config (:func:`check_config`).
+    source : str
+        What the config came from, for the errors (ValueError).
 
     Returns
     -------
@@ -180,10 +182,22 @@ def plan_steps(config: dict[str, Any]) -> tuple[int, dict[str, Any], str | None]
             hyper["n_steps"] = n_steps
             fitted = f" (n_steps {n_steps} fitted to the steps asked; set hyperparameters.n_steps to choose)"
         unit, what = int(hyper["n_steps"]) * n, f"rollouts of n_steps {hyper['n_steps']} x {n} envs"
+        batch = int(hyper.get("batch_size", defaults["batch_size"].default))
+        if batch > unit > 1:
+            # SB3 would train on the whole rollout as one minibatch, and say so in a warning
+            if "batch_size" in config["hyperparameters"]:
+                raise ValueError(
+                    f"{source}: hyperparameters.batch_size {batch} is more than a rollout holds ({what}: "
+                    f"{unit} transitions); set batch_size to at most {unit} or raise n_steps"
+                )
+            hyper["batch_size"] = unit
+            fitted += f" (batch_size {unit}: one rollout)"
     else:
         freq = hyper.get("train_freq", defaults["train_freq"].default)
         if not isinstance(freq, int):
-            raise ValueError(f"hyperparameters: train_freq must be an integer number of steps, got {freq!r}")
+            raise ValueError(
+                f"{source}: hyperparameters.train_freq must be an integer number of steps, got {freq!r}"
+            )
         unit, what = freq * n, f"collections of train_freq {freq} x {n} envs"
     unit = max(unit, 1)  # a zero n_steps or train_freq: SB3 names it when the model is made
     steps = math.ceil(asked / unit) * unit

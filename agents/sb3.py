@@ -88,7 +88,7 @@ def train(config: dict[str, Any], out: Path, progress: bool = True, source: str 
     check_env_id(config["env"])
     if config["tensorboard"] and importlib.util.find_spec("tensorboard") is None:
         raise ValueError('TensorBoard logs need the tensorboard package: pip install "ssme-envs[rl]"')
-    steps, hyper, note = plan_steps(config)
+    steps, hyper, note = plan_steps(config, source)
     config = {**config, "hyperparameters": hyper}  # config.toml records a fitted n_steps
     bar = progress and all(importlib.util.find_spec(m) is not None for m in ("tqdm", "rich"))
     algo, env_id, seed, n = config["algo"], config["env"], config["seed"], config["num_envs"]

@@ -70,6 +70,11 @@ BAD_TRAINING = [
     ("ppo", HYPER + "clip_range = -1.0", "hyperparameters.clip_range must be a number > 0, got -1.0"),
     ("sac", HYPER + "learning_starts = -5", "hyperparameters.learning_starts must be an integer >= 0"),
     ("td3", HYPER + "target_noise_clip = -1.0", "hyperparameters.target_noise_clip must be a number >= 0"),
+    (
+        "ppo",
+        HYPER + "n_steps = 8\nbatch_size = 1024",
+        "hyperparameters.batch_size 1024 is more than a rollout",
+    ),
 ]
 
 
@@ -341,3 +346,32 @@ def test_evaluate_to_refuses_one_spec_given_as_a_string(tmp_path):
 
     with pytest.raises(TypeError, match="list of controller specs"):
         evaluate_to(tmp_path / "out", "ssme_envs/EngineTracking-v0", controllers="lqi", episodes=1)
+
+
+def test_a_default_minibatch_above_the_rollout_is_the_rollout_and_trains_the_same_bits():
+    """A short run fits n_steps below PPO's default batch_size of 64: SB3 then trains on the whole
+    rollout as one minibatch (with a warning). The plan sets batch_size to the rollout, which SB3
+    trains on identically, silently."""
+    import gymnasium as gym
+    import stable_baselines3
+    import torch
+
+    from agents.run_config import check_config, plan_steps
+
+    config = check_config({"algo": "ppo", "env": NOZZLE, "steps": 10, "num_envs": 1, "hyperparameters": {}})
+    steps, hyper, note = plan_steps(config)
+    assert (steps, hyper["n_steps"], hyper["batch_size"]) == (
+        10,
+        10,
+        10,
+    ) and "batch_size 10: one rollout" in note
+
+    def trained(batch_size: int) -> list:
+        model = stable_baselines3.PPO("MlpPolicy", gym.make(NOZZLE), n_steps=10, batch_size=batch_size,
+                                      n_epochs=2, seed=3, device="cpu")  # fmt: skip
+        model.learn(10)
+        return [p.detach().clone() for p in model.policy.parameters()]
+
+    with pytest.warns(UserWarning, match="mini-batch size of 64"):
+        by_sb3 = trained(64)
+    assert all(torch.equal(a, b) for a, b in zip(by_sb3, trained(10), strict=True))

@@ -77,7 +77,7 @@ def add_learning_commands(commands: Any) -> None:
 
 def train_command(args: argparse.Namespace) -> int:
     from agents.run_config import MAX_SEED
-    from agents.sb3 import check_config, load_config, train
+    from agents.sb3 import check_config, load_config, plan_steps, train
     from ssme_envs.evaluation import check_env_id
 
     config = load_config(args.config) if args.config is not None else {}
@@ -91,6 +91,7 @@ def train_command(args: argparse.Namespace) -> int:
     config = check_config(config, source)
     check_env_id(config["env"])  # before the output directory is made
     check_training(config)
+    plan_steps(config, source)  # its refusals too before the output directory is made
     created = not args.out.exists()
     _make_dir(args.out)
     try:
