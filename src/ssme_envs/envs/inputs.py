@@ -14,7 +14,7 @@ import gymnasium as gym
 import numpy as np
 
 from ssme_envs.envs.task import real_number, shown
-from ssme_envs.models.linear import holds_bool
+from ssme_envs.models.linear import holds_bool, masked_elements
 
 REAL_KINDS = "fiu"  # numpy dtype kinds of real numbers: bool, complex, strings and objects are not
 
@@ -119,7 +119,7 @@ def _floats(values: Iterable[Any], action: Any, name: str = "action") -> list[fl
 def _unmasked(array: np.ma.MaskedArray, expected: str) -> np.ndarray:
     """A masked array's data, or ValueError if an element is masked: a masked element has no
     value (its ``tolist`` is None, its data whatever lies beneath), so no action can be read."""
-    masked = int(np.ma.getmaskarray(array).sum())
+    masked = masked_elements(array)
     if masked:
         raise ValueError(f"{expected}, got a masked array with {masked} masked element(s) of {array.size}")
     return array.data

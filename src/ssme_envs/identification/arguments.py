@@ -17,7 +17,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from ssme_envs.identification.structure import check_search_length
-from ssme_envs.models.linear import check_dt, describe, holds_bool
+from ssme_envs.models.linear import check_dt, describe, holds_bool, masked_elements
 
 REAL_KINDS = "fiu"  # numpy dtype kinds of real numbers: bool, complex, strings and objects are not
 METHODS = ("iv", "ls")
@@ -55,14 +55,12 @@ def real_record(value: Any, name: str, channels: str) -> np.ndarray:
     """``value`` as an array of real numbers, shape (T,) or (T, k) with k >= 1, else an error
     naming ``name``; ``channels`` ("inputs", "outputs") says what its columns are."""
     expected = f"{name} must be real numbers (an int or float array of shape (samples, {channels}))"
-    if isinstance(value, np.ma.MaskedArray):
-        # np.asarray would drop the mask and keep whatever the masked samples hold
-        masked = int(np.ma.count_masked(value))
-        if masked:
-            raise ValueError(
-                f"{name} has {masked} masked value{'s' if masked > 1 else ''} of {value.size}: fill or "
-                "cut out the masked samples first (the identifiers do not read a mask)"
-            )
+    masked = masked_elements(value)
+    if masked:
+        raise ValueError(
+            f"{name} has {masked} masked value{'s' if masked > 1 else ''} of {value.size}: fill or "
+            "cut out the masked samples first (the identifiers do not read a mask)"
+        )
     try:
         array = np.asarray(value)
     except ValueError:  # a ragged nesting

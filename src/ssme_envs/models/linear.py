@@ -259,6 +259,12 @@ def holds_bool(values: Iterable[Any]) -> bool:
     return False
 
 
+def masked_elements(value: Any) -> int:
+    """How many elements of ``value`` are masked (0 unless it is a masked array): a masked element
+    has no value, and ``np.asarray`` would drop the mask and read whatever lies beneath it."""
+    return int(np.ma.count_masked(value)) if isinstance(value, np.ma.MaskedArray) else 0
+
+
 __all__ = [
     "Dimensions",
     "PlantMatrices",
@@ -270,6 +276,7 @@ __all__ = [
     "describe",
     "finite_float",
     "holds_bool",
+    "masked_elements",
     "non_number_at",
     "refuse_non_numbers",
     "refuse_unknown_keys",
