@@ -24,7 +24,7 @@ import numpy as np
 from agents.base import BatchController, task_of
 from agents.lqi import LQIServo, design_servo
 from agents.plants import linear_design, nozzle_joint
-from ssme_envs.envs.nozzle_task import rule_substeps
+from ssme_envs.envs.nozzle_plants import rule_substeps
 from ssme_envs.envs.plant_spread import NAMES, PlantSpread
 from ssme_envs.robustness import DEFAULT_SPREAD, cvar, episode_costs
 

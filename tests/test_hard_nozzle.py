@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from agents import parse_controller
-from ssme_envs.envs.nozzle_task import resolve_nozzle, strong_linear_nozzle
+from ssme_envs.envs.nozzle_plants import resolve_nozzle, strong_linear_nozzle
 from ssme_envs.evaluation import evaluate
 from ssme_envs.models.nozzle import identified_nozzle, strong_nozzle
 

@@ -27,7 +27,7 @@ from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
 import ssme_envs  # noqa: F401
-from ssme_envs.envs import nozzle_task
+from ssme_envs.envs import nozzle_plants, nozzle_task
 from ssme_envs.envs.launcher_pitch import LauncherTask
 from ssme_envs.envs.nozzle_task import NozzleTask
 from ssme_envs.envs.tracking_env import EpisodeOverError
@@ -214,7 +214,7 @@ def test_a_damping_limited_plant_that_diverged_now_runs_finite():
     substeps, where h b/J = 7.9 is beyond RK4's real-axis limit and the motion diverges; the
     stability rule takes 2316 and the env runs finite."""
     plant = NozzleParameters.linear(1e-3, 376.53, 1.43e5)
-    old = recommended_substeps(plant, 0.008, ENVELOPE, nozzle_task.ENV_STEP_RATE)
+    old = recommended_substeps(plant, 0.008, ENVELOPE, nozzle_plants.ENV_STEP_RATE)
     assert 0.008 / old * plant.b / plant.J > RK4_REAL_AXIS_LIMIT
     with np.errstate(all="ignore"):
         diverged = simulate_nozzle(plant, np.full(20, 1e-3), substeps=old)

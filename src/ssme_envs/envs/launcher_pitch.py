@@ -20,14 +20,8 @@ from ssme_envs.envs.launcher_servo import (
     servo_floats,
 )
 from ssme_envs.envs.nozzle_compiled import score_config, score_kernel, score_observe
-from ssme_envs.envs.nozzle_task import (
-    DEG,
-    ENV_STEP_RATE,
-    NozzleTask,
-    episode_options,
-    integrate,
-    resolve_nozzle,
-)
+from ssme_envs.envs.nozzle_plants import ENV_STEP_RATE, resolve_nozzle
+from ssme_envs.envs.nozzle_task import DEG, NozzleTask, episode_options, integrate
 from ssme_envs.envs.plant_spread import covered_joints, resolve_spread
 from ssme_envs.envs.references import Fault
 from ssme_envs.envs.task import SYNCED, Blocks, Carrier, Observation, Uniforms, Value, check_number

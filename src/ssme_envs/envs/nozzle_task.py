@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, ClassVar, NamedTuple
@@ -13,6 +13,7 @@ import gymnasium as gym
 import numpy as np
 
 from ssme_envs.envs.nozzle_compiled import score_config, score_kernel, score_observe
+from ssme_envs.envs.nozzle_plants import resolve_nozzle, rule_substeps
 from ssme_envs.envs.plant_spread import PlantSpread, covered_joints, resolve_spread
 from ssme_envs.envs.references import (
     Fault,
@@ -42,27 +43,12 @@ from ssme_envs.models.nozzle import (
     NozzleParameters,
     RK4Parameters,
     check_stable_substeps,
-    identified_nozzle,
-    integration_substeps,
-    published_nozzle,
     rk4_arrays,
     rk4_floats,
     rk4_parameters,
-    strong_nozzle,
 )
 
 DEG = 180.0 / math.pi
-# RK4 substeps per sample by h * rate <= 0.25 (models.nozzle.recommended_substeps): 3 for Table 1,
-# within 3e-4 of the motion on the PRBS test of experiments/results/nozzle_integration_accuracy.md
-# and within half the default sensor noise (1e-4 rad) on 3 deg motions under any torque, ten
-# seeded joints drawn around it within the sensor noise; the linear and the strong joints within 3e-4
-# (tests/test_nozzle_integration_references.py, against scipy's solve_ivp). The Bouc-Wen law's
-# kink at velocity reversals, which the rate (the natural frequency) does not count, sets the
-# error of the hysteretic joints: 4 substeps are not better on every torque.
-# models.nozzle.integration_substeps adds RK4's stability rule (stiffness, damping and hysteresis
-# rates at h * rate <= 1.3, half the stability limit) and refuses plants that need more than
-# MAX_SUBSTEPS; the accuracy rule sets the count of Table 1's and the identified joints.
-ENV_STEP_RATE = 0.25
 NOZZLE_FAULTS = ("sensor_bias", "gain_loss")
 NOZZLE_OBSERVATION = Observation(
     names=("angle_deg", "rate_deg_s", "ref_deg", "err_deg", "err_int_deg_s", "prev_action"),
@@ -92,54 +78,6 @@ def integrate(plant: Any, tau: Value, h: float, steps: int, p: RK4Parameters, op
         rk4_arrays(plant, tau, h, steps, p, skip=ops.restarting)
         return plant
     return rk4_floats(*plant, tau, h, steps, p)
-
-
-def strong_linear_nozzle() -> NozzleParameters:
-    """The strong-hysteresis nozzle's small-signal linear joint (same J, b, stiffness at rest)."""
-    strong = strong_nozzle()
-    return NozzleParameters.linear(strong.J, strong.b, strong.small_signal_stiffness)
-
-
-# plant presets -> (the joint, the packaged identified model the controllers design on)
-PLANTS: dict[str, tuple[Callable[[], NozzleParameters], str]] = {
-    "bouc_wen": (lambda: published_nozzle("bouc_wen"), "table1"),
-    "linear": (lambda: published_nozzle("linear"), "table1"),
-    "identified": (lambda: identified_nozzle("table1").plant(), "table1"),
-    "strong": (strong_nozzle, "strong"),
-    "strong_linear": (strong_linear_nozzle, "strong"),
-    "strong_identified": (lambda: identified_nozzle("strong").plant(), "strong"),
-}
-
-
-def resolve_nozzle(plant: str | Path | NozzleParameters | NozzleModel) -> tuple[NozzleParameters, str]:
-    """The joint behind the env and the bench test whose identified model designs for it.
-
-    ``plant``: a preset of :data:`PLANTS` (``"bouc_wen"``: Table 1's hysteretic joint, the
-    truth; ``"linear"``: its linear row; ``"identified"``: the packaged model identified from its
-    bench test; ``"strong"``, ``"strong_linear"``, ``"strong_identified"``: the same for the
-    strong-hysteresis nozzle), a nozzle model.json path, or a parameter/model object (designed
-    for with Table 1's identified model).
-    """
-    if isinstance(plant, NozzleParameters):
-        return plant, "table1"
-    if isinstance(plant, NozzleModel):
-        return plant.plant(), "table1"
-    if isinstance(plant, str) and plant in PLANTS:
-        joint, design = PLANTS[plant]
-        return joint(), design
-    if isinstance(plant, str | Path) and str(plant).endswith(".json"):
-        return NozzleModel.load(plant).plant(), "table1"
-    raise ValueError(
-        f"plant must be one of {', '.join(PLANTS)}, a nozzle model.json path or a model, got {shown(plant)}"
-    )
-
-
-def rule_substeps(joints: Sequence[NozzleParameters], envelope: float) -> int:
-    """RK4 substeps per env step for the worst of ``joints`` (the env's rule, see NozzleTVCEnv)."""
-    return max(
-        integration_substeps(joint, NOZZLE_DT, envelope, DEFAULT_TORQUE_LIMIT, ENV_STEP_RATE, sample="step")
-        for joint in joints
-    )
 
 
 def episode_options(
@@ -403,11 +341,7 @@ class NozzleTask:
 __all__ = [
     "DEG",
     "NOZZLE_OBSERVATION",
-    "PLANTS",
     "NozzleState",
     "NozzleTask",
     "episode_options",
-    "resolve_nozzle",
-    "rule_substeps",
-    "strong_linear_nozzle",
 ]

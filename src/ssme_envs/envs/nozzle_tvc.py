@@ -4,7 +4,8 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from ssme_envs.envs.nozzle_task import DEG, ENV_STEP_RATE, NOZZLE_OBSERVATION, NozzleTask, resolve_nozzle
+from ssme_envs.envs.nozzle_plants import ENV_STEP_RATE, resolve_nozzle
+from ssme_envs.envs.nozzle_task import DEG, NOZZLE_OBSERVATION, NozzleTask
 from ssme_envs.envs.tracking_env import TrackingEnv
 
 OBS_NAMES = NOZZLE_OBSERVATION.names  # the observation columns, kept for existing imports
