@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import copy
 import importlib
-import os
 
 import gymnasium as gym
 import numpy as np
@@ -19,7 +18,7 @@ from hypothesis import strategies as st
 import ssme_envs  # noqa: F401
 from ssme_envs.envs import episode_draws
 from ssme_envs.envs.episode_draws import ORIGIN_WORDS, EpisodeDraws
-from ssme_envs.models.kernels import NO_KERNEL
+from ssme_envs.models.kernels import NO_KERNEL, references_requested
 
 needs_kernel = pytest.mark.skipif(episode_draws.KERNEL != "compiled", reason="the draw kernel is not built")
 
@@ -199,7 +198,7 @@ def test_vector_env_with_other_bit_generators_equals_sync(env_id):
 def test_a_built_kernel_is_used():
     """A build that the import check refused would leave the kernel's tests skipped: where the
     extension is built (and the references are not asked for), it must be the one in use."""
-    if os.environ.get(NO_KERNEL):
+    if references_requested():
         pytest.skip(f"{NO_KERNEL} asks for the references")
     try:
         importlib.import_module("ssme_envs.models._draw_kernel")

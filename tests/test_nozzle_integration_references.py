@@ -15,7 +15,7 @@ The claims under test, and their units (an error is ``max_k |x_env(k) - x_ref(k)
 over the steps the env runs: until its episode ends, which the first step beyond the 6 deg
 envelope does, and which the rule sizes for):
 
-- nozzle_task.py, of the env's own rule (``h * rate <= ENV_STEP_RATE = 0.25``): the linear and
+- nozzle_plants.py, of the env's own rule (``h * rate <= ENV_STEP_RATE = 0.25``): the linear and
   the strong joints within 3e-4 of the motion (ENV_CLAIM); Table 1's Bouc-Wen joint on any
   torque within half the default sensor noise on a 3 deg motion (BOUC_WEN_CLAIM: 3e-4 held only
   on the PRBS test it was first measured on), ten seeded joints drawn around it within the sensor
@@ -55,7 +55,7 @@ from ssme_envs.models.nozzle import (
 NOZZLE, LAUNCHER = "ssme_envs/NozzleTVC-v0", "ssme_envs/LauncherPitch-v0"
 DT = 0.008  # s, the env step (NozzleTVC docstring)
 FULL_SCALE = 3.0e4  # N m, the action's full scale (NozzleTVC docstring)
-ENV_CLAIM = 3e-4  # relative to the motion, the env's rule at h * rate <= 0.25 (nozzle_task.py)
+ENV_CLAIM = 3e-4  # relative to the motion, the env's rule at h * rate <= 0.25 (nozzle_plants.py)
 RULE_CLAIM = 2.5e-4  # "about 2e-4", recommended_substeps at step_rate 0.2, on the PRBS test
 # Where the Bouc-Wen law's kink at velocity reversals sets RK4's error (a rate the rule does not
 # count), the docs bound it by the env's default sensor noise (1e-4 rad) on a 3 deg motion, not

@@ -54,9 +54,11 @@ class EngineTrackingEnv(TrackingEnv):
     ``max_episode_steps`` too. ``step`` after ``terminated`` or ``truncated`` (or before the first
     ``reset``) raises :class:`~ssme_envs.envs.tracking_env.EpisodeOverError` (a ``ValueError``
     and an ``AssertionError``, as gymnasium's ``SyncVectorEnv`` refuses it in DISABLED autoreset
-    mode): call ``reset``. (gymnasium's ``TimeLimit`` wrapper does not check: behind a limit
-    shorter than the episode the env steps on.) ``reset`` takes no options: ``options`` must be
-    None or ``{}``, else TypeError (not a dict) or ValueError (naming the unknown keys).
+    mode): call ``reset``. Through ``gymnasium.make``, a step before the first ``reset`` meets
+    gymnasium's ``OrderEnforcing`` wrapper first, which raises ``gymnasium.error.ResetNeeded``.
+    (gymnasium's ``TimeLimit`` wrapper does not check: behind a limit shorter than the episode the
+    env steps on.) ``reset`` takes no options: ``options`` must be None or ``{}``, else TypeError
+    (not a dict) or ValueError (naming the unknown keys).
 
     ## Arguments
     power : 65-109 %, default 100. plant : "truth" (default: the linked published model at

@@ -62,8 +62,9 @@ class NozzleTVCEnv(TrackingEnv):
     Termination on leaving the envelope; truncation after ``episode_seconds`` (4 s, 500 steps).
     ``gymnasium.make`` also applies the registered limit of 500 steps: for longer episodes pass
     ``max_episode_steps`` too. ``step`` after either (or before the first ``reset``) raises
-    :class:`~ssme_envs.envs.tracking_env.EpisodeOverError`: call ``reset``, which takes no options
-    (None or ``{}``; else TypeError or ValueError), as in ``EngineTracking-v0``.
+    :class:`~ssme_envs.envs.tracking_env.EpisodeOverError` (through ``gymnasium.make``, before the
+    first ``reset``, gymnasium's ``ResetNeeded``): call ``reset``, which takes no options (None or
+    ``{}``; else TypeError or ValueError), as in ``EngineTracking-v0``.
 
     Non-finite state: should the plant's state overflow or turn NaN anyway (the substep rule
     is meant to prevent it; its speed bounds are estimates), the step's reward comes out NaN or

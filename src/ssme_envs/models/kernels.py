@@ -9,7 +9,12 @@ import warnings
 from collections.abc import Callable
 from typing import Any
 
-NO_KERNEL = "SSME_ENVS_NO_KERNEL"  # set (non-empty): the references run, the same bits, slower
+NO_KERNEL = "SSME_ENVS_NO_KERNEL"  # set (not empty, not "0"): the references run, the same bits, slower
+
+
+def references_requested() -> bool:
+    """Whether :data:`NO_KERNEL` asks for the Python references (set, and not to "0")."""
+    return os.environ.get(NO_KERNEL, "") not in ("", "0")
 
 
 def load_kernel(name: str, agrees: Callable[[Any], bool], what: str) -> Any:
@@ -17,7 +22,7 @@ def load_kernel(name: str, agrees: Callable[[Any], bool], what: str) -> Any:
     None otherwise (or where :data:`NO_KERNEL` is set), with a RuntimeWarning where it was built
     but differs (a compiler that fused or reordered operations, or a build of an older source).
     ``what`` names the kernel in the warning."""
-    if os.environ.get(NO_KERNEL):
+    if references_requested():
         return None
     try:
         module = importlib.import_module(f"ssme_envs.models.{name}")
