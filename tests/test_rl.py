@@ -12,6 +12,7 @@ from agents import parse_controller
 from agents.sb3 import SHIPPED, PolicyController, check_config, load_config, plan_steps, shipped_policy
 from ssme_envs.cli import main
 from ssme_envs.evaluation import evaluate
+from ssme_envs.outputs import MARKER
 
 TRACKING = "ssme_envs/EngineTracking-v0"
 NOZZLE = "ssme_envs/NozzleTVC-v0"
@@ -78,7 +79,7 @@ def test_each_algorithm_trains_saves_and_acts(algo, tmp_path):
     assert main(["train", "--config", str(config), "--steps", "2048", "--seed", "1", "--out", str(out)]) == 0
     summary = json.loads((out / "training.json").read_text())
     assert summary["steps"] == 2048 and [e["steps"] for e in summary["evaluations"]] == [1024, 2048]
-    assert sorted(p.name for p in out.iterdir()) == RUN_FILES  # no zip, nothing pickled
+    assert sorted(p.name for p in out.iterdir() if p.name != MARKER) == RUN_FILES  # no zip, nothing pickled
     best = max(summary["evaluations"], key=lambda e: e["return"])
     assert summary["kept"] == {"model": "final" if best["steps"] == 2048 else "best", "steps": best["steps"]}
     policy = PolicyController(out)
@@ -144,7 +145,7 @@ def test_train_shorter_than_the_evaluation_interval_keeps_the_final_policy_and_e
     summary = json.loads((out / "training.json").read_text())
     assert summary["steps"] == 320 and summary["kept"] == {"model": "final", "steps": 320}
     assert load_config(out / "config.toml")["hyperparameters"] == {"n_steps": 80}
-    assert sorted(p.name for p in out.iterdir()) == sorted([*RUN_FILES, "tensorboard"])
+    assert sorted(p.name for p in out.iterdir() if p.name != MARKER) == sorted([*RUN_FILES, "tensorboard"])
     assert any(p.name.startswith("events.out.tfevents") for p in (out / "tensorboard").rglob("*"))
     report = tmp_path / "eval"
     args = ["evaluate", "--env", NOZZLE, "--controllers", f"lqi,ppo:{out}", "--scenario", "step",
@@ -235,3 +236,34 @@ def test_every_evaluation_runs_the_same_episodes(tmp_path, monkeypatch):
     assert main(["train", "--config", str(config), "--steps", "768", "--out", str(tmp_path / "run")]) == 0
     assert len(firsts) == 3 and all(np.array_equal(f, firsts[0]) for f in firsts)
     assert len({tuple(row) for row in firsts[0].round(6)}) == 3  # three different episodes
+
+
+def test_train_out_is_staged_like_every_command(tmp_path, capsys, monkeypatch):
+    """A directory holding other files is refused untouched; a run that fails leaves the earlier
+    run whole (train wrote into --out directly, and overwrote a config.toml it found there)."""
+    import agents.sb3
+
+    foreign = tmp_path / "mine"
+    foreign.mkdir()
+    (foreign / "config.toml").write_text("precious")
+    argv = ["train", "--env", NOZZLE, "--algo", "ppo", "--steps", "64", "--out"]
+    assert main([*argv, str(foreign)]) == 2
+    assert "is not empty and was not written by ssme-envs" in capsys.readouterr().err
+    assert [p.name for p in foreign.iterdir()] == ["config.toml"] and (
+        foreign / "config.toml"
+    ).read_text() == "precious"
+
+    def failing(config, out, progress=True, source="config"):
+        (out / "policy.json").write_text("{}")
+        raise ValueError("the run failed")
+
+    earlier = tmp_path / "run"
+    earlier.mkdir()
+    (earlier / MARKER).write_text("{}")
+    (earlier / "policy.json").write_text("earlier")
+    monkeypatch.setattr(agents.sb3, "train", failing)
+    assert main([*argv, str(earlier)]) == 2
+    assert capsys.readouterr().err == "error: the run failed\n"
+    assert sorted(p.name for p in earlier.iterdir()) == [MARKER, "policy.json"]
+    assert (earlier / "policy.json").read_text() == "earlier"
+    assert not [p.name for p in tmp_path.iterdir() if ".new-" in p.name]  # the failed run's directory

@@ -32,7 +32,6 @@ from ssme_envs.cli_identify import identify_engine as _identify_engine
 from ssme_envs.cli_identify import identify_nozzle as _identify_nozzle
 from ssme_envs.cli_identify import validate_engine as _validate_engine
 from ssme_envs.cli_learn import add_learning_commands, train_command, tune_command
-from ssme_envs.outputs import run_directory
 
 OUTPUT_NOTE = (
     "--out is built in a fresh directory beside it and swapped in when the run succeeds: an earlier "
@@ -275,9 +274,8 @@ def _dispatch(args: argparse.Namespace) -> int:
         return _report(args)
     if args.command == "tune":
         return tune_command(args)
-    if args.command == "train":  # locked; train writes into --out itself
-        with run_directory(args.out, stage=False):
-            return train_command(args)
+    if args.command == "train":
+        return train_command(args)
     if args.command == "validate" and args.plant == "engine":
         return _validate_engine(args)
     raise _UsageError(f"unknown command {args.command}")  # pragma: no cover

@@ -4,11 +4,13 @@ shared study); their parsers and what they run."""
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 from typing import Any
 
 from ssme_envs.cli_checks import check_training, integer
-from ssme_envs.outputs import check_file_target
+from ssme_envs.cli_identify import noting_replacement
+from ssme_envs.outputs import check_file_target, output_directory
 
 
 def add_learning_commands(commands: Any) -> None:
@@ -92,14 +94,13 @@ def train_command(args: argparse.Namespace) -> int:
     check_env_id(config["env"])  # before the output directory is made
     check_training(config)
     plan_steps(config, source)  # its refusals too before the output directory is made
-    created = not args.out.exists()
-    _make_dir(args.out)
-    try:
-        summary = train(config, args.out, source=source)
-    except BaseException:
-        if created and not any(args.out.iterdir()):  # refused before writing: leave nothing behind
-            args.out.rmdir()
-        raise
+    with noting_replacement(args.out), output_directory(args.out) as work:
+        if config["tensorboard"]:
+            print(
+                f"TensorBoard logs while it trains: {work / 'tensorboard'} (then in {args.out})",
+                file=sys.stderr,
+            )
+        summary = train(config, work, source=source)
     kept = summary["kept"]
     which = "final policy" if kept["model"] == "final" else "best evaluation's policy"
     print(
@@ -122,13 +123,6 @@ def tune_command(args: argparse.Namespace) -> int:
     if args.out is not None:
         print(f"wrote {tuning.write_best_config(study, args.out)}")
     return 0
-
-
-def _make_dir(path: Path) -> None:
-    try:
-        path.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise ValueError(f"cannot create output directory {path}: {exc.strerror}") from None
 
 
 __all__ = ["add_learning_commands", "train_command", "tune_command"]
