@@ -15,6 +15,7 @@ from pathlib import Path
 
 from agents import parse_controller
 from ssme_envs.evaluation import evaluate
+from ssme_envs.outputs import write_text
 from ssme_envs.script_options import script_parser
 
 ENV = "ssme_envs/EngineTracking-v0"
@@ -47,7 +48,7 @@ def main() -> None:
     ]
     lines += [f"| {spec} | {sec:.2f} | {sec / reference:.1f} |" for spec, sec in rows]
     lines += ["", f"All four in one `evaluate` call: {total:.1f} s (the bound held to: 30 s)."]
-    OUT.write_text("\n".join(lines) + "\n")
+    write_text(OUT, "\n".join(lines) + "\n")
     print("\n".join(lines))
 
 

@@ -23,6 +23,7 @@ from stable_baselines3.common.vec_env import VecNormalize
 
 from agents.sb3 import check_config, load_config
 from ssme_envs.envs.sb3_adapter import make_sb3_vec_env
+from ssme_envs.outputs import write_text
 from ssme_envs.script_options import int_within, script_parser
 
 HERE = Path(__file__).resolve().parent
@@ -70,7 +71,7 @@ def main() -> None:
     ]
     lines += [f"| {e} | {rates[e]:,.0f} | {rates[e] / reference:.2f} |" for e in ENVS]
     path = HERE / "results" / "bench_ppo.md"
-    path.write_text("\n".join(lines) + "\n")
+    write_text(path, "\n".join(lines) + "\n")
     print("\n".join(lines))
 
 

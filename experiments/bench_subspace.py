@@ -33,6 +33,7 @@ from scipy.optimize import linear_sum_assignment
 
 from ssme_envs.identification.metrics import fit_percent
 from ssme_envs.identification.subspace import InnovationsModel, dsr_e
+from ssme_envs.outputs import write_text
 from ssme_envs.script_options import int_within, script_parser
 
 OUT = Path(__file__).resolve().parent / "results" / "bench_subspace.md"
@@ -191,7 +192,7 @@ def main() -> None:
     table = "\n".join(lines) + "\n"
     print(table)
     OUT.parent.mkdir(parents=True, exist_ok=True)
-    OUT.write_text(table)
+    write_text(OUT, table)
 
 
 if __name__ == "__main__":

@@ -17,6 +17,7 @@ import numpy as np
 
 from ssme_envs.identification import identify, model_prediction, see
 from ssme_envs.models import POWER_LEVELS, TruthConfig, published_model, simulate
+from ssme_envs.outputs import write_text
 from ssme_envs.script_options import script_parser
 from ssme_envs.signals import prbs, step_ramp_test_signal
 
@@ -58,7 +59,7 @@ def main() -> None:
                     f"{max(dependent):.2e} | {worst['ls']:.2e} | {worst['iv']:.2e} |"
                 )
         print(f"{power} % done")
-    OUT.write_text("\n".join(lines) + "\n")
+    write_text(OUT, "\n".join(lines) + "\n")
     print(f"wrote {OUT}")
 
 

@@ -21,6 +21,7 @@ from agents.lqi import LQIServo
 from agents.plants import nozzle_joint
 from agents.tvc import HysteresisCompensated
 from ssme_envs.evaluation import evaluate
+from ssme_envs.outputs import write_text
 from ssme_envs.script_options import episodes_within_memory, script_parser
 
 NOZZLE = "ssme_envs/NozzleTVC-v0"
@@ -96,7 +97,7 @@ def main() -> None:
             iae = results[scenario][name]["outputs"]["angle"]["iae"]
             cells.append(f"{iae:.4f}" + ("" if name == "lqi" else f" ({100 * (iae / base - 1):+.1f} %)"))
         lines.append(f"| {scenario} | " + " | ".join(cells) + " |")
-    OUT.write_text("\n".join(lines) + "\n")
+    write_text(OUT, "\n".join(lines) + "\n")
     print("\n".join(lines))
 
 

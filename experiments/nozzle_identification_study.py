@@ -23,6 +23,7 @@ from ssme_envs.identification.nozzle_pipeline import (
 )
 from ssme_envs.identification.nozzle_report import parameter_row
 from ssme_envs.models.nozzle import NozzleParameters, published_nozzle
+from ssme_envs.outputs import write_text
 from ssme_envs.script_options import script_parser
 
 OUT = Path(__file__).resolve().parent / "results" / "nozzle_identification_study.md"
@@ -91,7 +92,7 @@ def main() -> None:
             "",
         ]
         print(f"{title}: done in {elapsed:.1f} s")
-    OUT.write_text("\n".join(lines) + "\n")
+    write_text(OUT, "\n".join(lines) + "\n")
     print("\n".join(lines))
 
 

@@ -55,6 +55,7 @@ from ssme_envs.identification.nozzle_uncertainty import (  # noqa: E402
 )
 from ssme_envs.identification.subspace import dsr_e, second_order_parameters  # noqa: E402
 from ssme_envs.models.nozzle import NOZZLE_DT, published_nozzle  # noqa: E402
+from ssme_envs.outputs import write_text  # noqa: E402
 from ssme_envs.script_options import comma_choices, int_within, max_workers, output_file, script_parser  # noqa: E402
 
 OUT = Path(__file__).resolve().parent / "results" / "nozzle_uncertainty_coverage.md"
@@ -271,7 +272,7 @@ def main() -> None:
     lines += linear_section(args.seeds, args.replicates, args.workers, chosen)
     lines += bouc_wen_section(args.bouc_wen_seeds, args.workers, chosen)
     lines += [f"Total time {time.perf_counter() - start:.0f} s on {args.workers} processes.", ""]
-    args.out.write_text("\n".join(lines))
+    write_text(args.out, "\n".join(lines))
     print("\n".join(lines))
 
 

@@ -23,6 +23,7 @@ import ssme_envs  # noqa: F401
 from agents.base import columns
 from ssme_envs.models.engine import POWER_LEVELS
 from ssme_envs.models.linked import POWER_RANGE, LinkedEngineModel
+from ssme_envs.outputs import save_figure
 from ssme_envs.script_options import script_parser
 
 OUT = Path(__file__).resolve().parent / "results" / "throttle_open_loop.png"
@@ -66,7 +67,7 @@ def main() -> None:
     axes[1, 1].grid(alpha=0.3)
     fig.suptitle("EngineThrottle-v0 open loop on the nominal valve schedule (mission profile, 60 s)")
     fig.tight_layout()
-    fig.savefig(OUT, dpi=110)
+    save_figure(fig, OUT, dpi=110)
     err = rows[:, 2:4] - rows[:, :2]
     print(f"max |error| Pc {np.abs(err[:, 0]).max():.2f} %, MR {np.abs(err[:, 1]).max():.2f} %; wrote {OUT}")
 

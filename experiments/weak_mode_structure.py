@@ -21,6 +21,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from test_identification_structures import weak_mode_record
 
 from ssme_envs.identification import identify
+from ssme_envs.outputs import write_text
 from ssme_envs.script_options import int_within, output_file, script_parser
 
 
@@ -53,7 +54,7 @@ def main() -> None:
     text = "\n".join(lines) + "\n"
     print(text)
     if args.out is not None:
-        args.out.write_text(text)
+        write_text(args.out, text)
 
 
 if __name__ == "__main__":

@@ -30,7 +30,9 @@ from ssme_envs.script_options import (
 ROOT = Path(__file__).resolve().parents[1]
 Case = tuple[str, tuple[str, ...], str]  # script, arguments, the option the error names
 BOGUS = ("--bogus",)  # an unknown option: argparse's own error (scripts with quick imports only)
-# script -> (arguments, the option the error names); {missing}, {file}, {dir}: paths made per run.
+# script -> (arguments, the option the error names); {missing}, {file}, {dir}, {fifo} (a named
+# pipe: written to, it would hang the script at its end), {slash} (a new path ending in "/", which
+# names a directory): paths made per run.
 # A run costs the script's imports (about 1 s; bench_ppo's torch 3 s): a few cases each.
 CASES: dict[str, list[tuple[tuple[str, ...], str]]] = {
     "bench_engine_identification": [(("--repeats", "0"), "--repeats"), (("--repeats", "2.5"), "--repeats")],
@@ -67,6 +69,7 @@ CASES: dict[str, list[tuple[tuple[str, ...], str]]] = {
         (("--out", "{missing}"), "--out"),
         (("--out", "{file}"), "--out"),
         (("--out", "{dir}"), "--out"),
+        (("--out", "{fifo}"), "--out"),
     ],
     "readme_figures": [
         (("--episodes", "0"), "--episodes"),
@@ -80,7 +83,13 @@ CASES: dict[str, list[tuple[tuple[str, ...], str]]] = {
         (BOGUS, "--bogus"),
     ],
     "train_policies": [(("no_such_config",), "CONFIG")],
-    "weak_mode_structure": [(("--seeds", "0"), "--seeds"), (("--out", "{missing}"), "--out")],
+    "weak_mode_structure": [
+        (("--seeds", "0"), "--seeds"),
+        (("--out", "{missing}"), "--out"),
+        (("--seeds", "1", "--out", "{fifo}"), "--out"),
+        (("--seeds", "1", "--out", "{dir}"), "--out"),
+        (("--seeds", "1", "--out", "{slash}"), "--out"),
+    ],
 }
 RUNS = [
     pytest.param((script, args, option), id=f"{script}:{' '.join(args)}")
@@ -104,7 +113,14 @@ def run_case(request, tmp_path_factory) -> Iterator[Callable[[Case], subprocess.
     """The finished run of a case. The runs of the selected cases start together, one per CPU."""
     tmp = tmp_path_factory.mktemp("out")
     (tmp / "a_file").write_text("")
-    paths = {"missing": str(tmp / "missing" / "x.md"), "file": str(tmp / "a_file" / "x.md"), "dir": str(tmp)}
+    os.mkfifo(tmp / "fifo")
+    paths = {
+        "missing": str(tmp / "missing" / "x.md"),
+        "file": str(tmp / "a_file" / "x.md"),
+        "dir": str(tmp),
+        "fifo": str(tmp / "fifo"),
+        "slash": str(tmp / "new") + "/",
+    }
     with ThreadPoolExecutor(max_workers=os.cpu_count() or 2) as pool:
         futures: dict[Case, Future] = {}
 
@@ -290,6 +306,49 @@ def test_output_file(tmp_path: Path) -> None:
     ]:
         with pytest.raises(argparse.ArgumentTypeError, match=why):
             output_file(str(bad))
+
+
+def test_output_file_refuses_special_files_and_directory_names(tmp_path: Path, capsys) -> None:
+    """A FIFO (a script writing its record into one would hang at its end), a link to one, a
+    device, and a path that names a directory by its form (a trailing "/", "/." or "/..", which
+    Path() drops) are refused with the path given; nothing is left in the directory."""
+    os.mkfifo(tmp_path / "fifo")
+    (tmp_path / "link").symlink_to(tmp_path / "fifo")
+    (tmp_path / "a_file").write_text("kept")
+    before = sorted(tmp_path.iterdir())
+    refused = {
+        tmp_path / "fifo": "not a regular file",
+        tmp_path / "link": "not a regular file",
+        Path(os.devnull): "not a regular file",
+        f"{tmp_path / 'new'}/": "names a directory",
+        f"{tmp_path / 'a_file'}/": "names a directory",
+        f"{tmp_path / 'new'}/.": "names a directory",
+        f"{tmp_path / 'new'}/..": "names a directory",
+        tmp_path: "must be a file, got the directory",
+    }
+    for bad, why in refused.items():
+        with pytest.raises(argparse.ArgumentTypeError, match=why) as error:
+            output_file(str(bad))
+        assert repr(str(bad)) in str(error.value) and "\n" not in str(error.value)
+    assert sorted(tmp_path.iterdir()) == before and (tmp_path / "a_file").read_text() == "kept"
+    assert output_file(str(tmp_path / "new")) == tmp_path / "new"
+    assert not (tmp_path / "new").exists()  # checked, not created
+    parser = script_parser("demo")
+    parser.add_argument("--out", type=output_file)
+    fifo = str(tmp_path / "fifo")
+    line = _parse(parser, ["--out", fifo], capsys)
+    assert line.startswith(f"error: --out must be a file this script can write, got {fifo!r} (")
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root writes in a read-only directory")
+def test_output_file_refuses_a_directory_it_cannot_write_in(tmp_path: Path) -> None:
+    locked = tmp_path / "locked"
+    locked.mkdir(mode=0o555)
+    try:
+        with pytest.raises(argparse.ArgumentTypeError, match="cannot write in"):
+            output_file(str(locked / "x.md"))
+    finally:
+        locked.chmod(0o755)
 
 
 def test_episodes_within_memory_holds_to_the_evaluate_commands_check() -> None:

@@ -14,6 +14,9 @@ from pathlib import Path
 from typing import NoReturn
 
 from ssme_envs.cli_checks import check_episodes, integer, number, one_line
+from ssme_envs.outputs import OutputError, check_file_target
+
+_OUT = "--out"  # the option named in check_file_target's messages (removed from them here)
 
 
 class _ScriptParser(argparse.ArgumentParser):
@@ -147,18 +150,28 @@ def output_file(text: str) -> Path:
     Returns
     -------
     Path
-        The path; ``argparse.ArgumentTypeError`` when it is a directory or its parent is not an
-        existing, writable directory (refused before the work, not after it).
+        The path; ``argparse.ArgumentTypeError`` when it names a directory (an existing one, or
+        any path ending in ``/``, ``/.`` or ``/..``), its parent is not an existing directory, or
+        :func:`~ssme_envs.outputs.check_file_target` refuses it (a FIFO, device or socket, or a
+        directory that does not take a new file): refused before the work, not after it (a FIFO
+        would hang the script's last write).
     """
     path = Path(text)
     if path.is_dir():
         raise argparse.ArgumentTypeError(f"must be a file, got the directory {text!r}")
+    if os.path.basename(text) in ("", ".", ".."):  # Path() and realpath() drop a trailing "/"
+        raise argparse.ArgumentTypeError(f"must be a file, got {text!r}, which names a directory")
     parent = path.parent
     if not parent.is_dir():
         why = "does not exist" if not parent.exists() else "is not a directory"
         raise argparse.ArgumentTypeError(f"must be in an existing directory, got {text!r} ({parent} {why})")
-    if not os.access(parent, os.W_OK | os.X_OK):
-        raise argparse.ArgumentTypeError(f"must be in a writable directory, got {text!r}")
+    try:
+        check_file_target(text, option=_OUT)
+    except OutputError as exc:  # "--out TEXT: why", or (a special file) "TARGET exists and is not ..."
+        why = str(exc).removeprefix(f"{_OUT} {text}: ")
+        raise argparse.ArgumentTypeError(
+            f"must be a file this script can write, got {text!r} ({why})"
+        ) from None
     return path
 
 
