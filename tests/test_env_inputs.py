@@ -670,3 +670,31 @@ def test_the_vector_env_refuses_a_float_masked_action():
     venv.reset(seed=0)
     with pytest.raises(ValueError, match="masked array with 4 masked"):
         venv.step(np.ma.masked_array(np.zeros((2, 2)), mask=True))
+
+
+@pytest.mark.parametrize(
+    ("inputs", "outputs"),
+    [
+        (("beta_fpov", "beta_opov"), ("pc", "mr")),
+        (("beta_opov", "beta_fpov"), ("mr", "pc")),
+        (("a", "b"), ("x", "y")),
+    ],
+)
+def test_an_engine_plant_of_other_channel_names_is_refused(tmp_path, inputs, outputs):
+    """A model identified with --inputs beta_fpov,beta_opov was stepped with its valves swapped
+    (the envs read channels by position): its DC gain, computed here from A, B and C, is the
+    published model's with rows and columns exchanged, and the env took it with exit 0."""
+    import dataclasses
+
+    from ssme_envs.models.engine import published_model
+
+    base = published_model(100)
+    swapped = dataclasses.replace(base, input_names=inputs, output_names=outputs)
+    gain = base.C @ np.linalg.solve(np.eye(base.A.shape[0]) - base.A, base.B)
+    assert not np.allclose(gain, gain[::-1, ::-1])  # a swap would change the plant the env steps
+    path = tmp_path / "model.json"
+    swapped.save(path)
+    for plant in (swapped, str(path)):
+        with pytest.raises(ValueError, match=r"plant must map inputs \['beta_opov', 'beta_fpov'\] to"):
+            gym.make(TRACKING, plant=plant)
+    gym.make(TRACKING, plant=base).reset(seed=0)  # the names in their order: taken

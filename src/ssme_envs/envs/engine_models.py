@@ -21,7 +21,7 @@ from ssme_envs.models.engine import (
     published_model,
 )
 from ssme_envs.models.linked import POWER_RANGE, LinkedEngineModel
-from ssme_envs.models.statespace import AlphaCanonicalModel
+from ssme_envs.models.statespace import ENGINE_INPUTS, ENGINE_OUTPUTS, AlphaCanonicalModel
 
 # normalized output units: the largest reference step and sensor bias the engine envs take are
 # 0.05 (5 % of rated Pc or MR, five times the default step); noise of a larger standard deviation
@@ -94,6 +94,15 @@ def env_plant(plant: str | Path | AlphaCanonicalModel, power: float) -> AlphaCan
         raise ValueError(
             "plant must have 2 inputs (OPOV, FPOV) and 2 outputs (Pc, MR), "
             f"got {model.n_inputs} and {model.n_outputs}"
+        )
+    # the envs read the channels by position: a model of other names, or of these in another
+    # order, would be stepped with its channels swapped or unknown
+    names = (tuple(model.input_names), tuple(model.output_names))
+    if names != (ENGINE_INPUTS, ENGINE_OUTPUTS):
+        raise ValueError(
+            f"plant must map inputs {list(ENGINE_INPUTS)} to outputs {list(ENGINE_OUTPUTS)} in that order, "
+            f"got {list(names[0])} -> {list(names[1])}; identify it from columns of these names "
+            "(ssme-envs identify engine --inputs beta_opov,beta_fpov --outputs pc,mr)"
         )
     if output_coupling(model) is not None:
         raise ValueError(

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from ssme_envs.models.statespace import ENGINE_INPUTS, ENGINE_OUTPUTS
 from ssme_envs.outputs import output_directory
 
 Progress = Callable[[str], None]
@@ -105,8 +106,8 @@ def identify_engine(
     out_dir: str | Path,
     data: Path | None = None,
     *,
-    inputs: Sequence[str] = ("beta_opov", "beta_fpov"),
-    outputs: Sequence[str] = ("pc", "mr"),
+    inputs: Sequence[str] = ENGINE_INPUTS,
+    outputs: Sequence[str] = ENGINE_OUTPUTS,
     dt: float | None = None,
     validate: Path | None = None,
     seed: int | None = None,

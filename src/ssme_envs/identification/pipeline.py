@@ -18,12 +18,12 @@ from ssme_envs.identification.alpha_canonical import Identification, identify
 from ssme_envs.identification.metrics import validate
 from ssme_envs.identification.records import read_columns, write_columns
 from ssme_envs.models.engine import ENGINE_DT, POWER_LEVELS, TruthConfig, published_model, simulate
-from ssme_envs.models.statespace import AlphaCanonicalModel
+from ssme_envs.models.statespace import ENGINE_INPUTS, ENGINE_OUTPUTS, AlphaCanonicalModel
 from ssme_envs.outputs import atomic_write
 from ssme_envs.signals import prbs, step_ramp_test_signal
 
-DEFAULT_INPUTS = ("beta_opov", "beta_fpov")
-DEFAULT_OUTPUTS = ("pc", "mr")
+DEFAULT_INPUTS = ENGINE_INPUTS
+DEFAULT_OUTPUTS = ENGINE_OUTPUTS
 DEFAULT_SEED = 2024
 PRBS_AMPLITUDE = 0.01  # normalized valve travel; figure 3 of the paper stays within +-0.02
 IDENTIFICATION_PERIODS = 8  # 127-bit periods: 1016 samples, 40.6 s

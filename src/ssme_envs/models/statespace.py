@@ -53,8 +53,15 @@ from ssme_envs.models.linear import (
 from ssme_envs.models.statespace_json import dumps_compact, read_json
 from ssme_envs.models.uncertainty import ParameterUncertainty
 
+# the engine's channels, in the order its models and envs hold them: valve positions -> chamber
+# pressure and mixture ratio
+ENGINE_INPUTS = ("beta_opov", "beta_fpov")
+ENGINE_OUTPUTS = ("pc", "mr")
+
 # check_dt, as_matrix, dumps_compact and read_json are re-exported: models and identification import them here
 __all__ = [
+    "ENGINE_INPUTS",
+    "ENGINE_OUTPUTS",
     "AlphaCanonicalModel",
     "AlphaStructure",
     "as_matrix",
@@ -189,8 +196,8 @@ class AlphaCanonicalModel(Dimensions):
     dt: float
     observability_indices: tuple[int, ...]
     lam: np.ndarray
-    input_names: tuple[str, ...] = ("beta_opov", "beta_fpov")
-    output_names: tuple[str, ...] = ("pc", "mr")
+    input_names: tuple[str, ...] = ENGINE_INPUTS
+    output_names: tuple[str, ...] = ENGINE_OUTPUTS
     fit: dict[str, Any] = field(default_factory=dict)
     uncertainty: ParameterUncertainty | None = None
 
