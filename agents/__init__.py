@@ -9,6 +9,7 @@ serves which env.
 from __future__ import annotations
 
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -119,6 +120,11 @@ def parse_controller(spec: str, env_id: str, allow_pickle: bool = False) -> Call
         raise ValueError(f"controller spec {spec!r} names nothing after ':'; write {name!r} or {name}:DESIGN")
     if name in ALGOS and design and design not in (*DESIGN_SOURCES, *POLICY_VARIANTS):
         return _trained(name, design, env_id, allow_pickle)
+    if name in ALGOS and name in CONTROLLERS and (Path(design) / "policy.json").is_file():
+        raise ValueError(
+            f"{spec!r} names a shipped policy, and ./{design} is a run directory too: write "
+            f"{name}:./{design} for the run (or run from another directory for the shipped policy)"
+        )
     valid = controller_names(env_id)
     if name not in valid:
         trained = ", ".join(f"{algo}:RUN_DIR" for algo in ALGOS)

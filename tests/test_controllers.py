@@ -196,3 +196,14 @@ def test_unknown_names_list_the_valid_ones():
         with pytest.raises(ValueError, match="names nothing after ':'"):
             parse_controller(spec, TRACKING)
     assert "hysteresis" in controller_names(NOZZLE) and "hysteresis" not in controller_names(TRACKING)
+
+
+def test_a_shipped_policy_name_that_is_also_a_run_directory_here_is_refused(tmp_path, monkeypatch):
+    """``ppo:spread`` loaded the shipped policy while ./spread, a run of the user's, went unread."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "spread").mkdir()
+    (tmp_path / "spread" / "policy.json").write_text("{}")
+    with pytest.raises(ValueError, match=r"write ppo:\./spread for the run"):
+        parse_controller("ppo:spread", NOZZLE)
+    (tmp_path / "identified").mkdir()  # a directory that holds no policy: no ambiguity
+    assert callable(parse_controller("ppo:identified", TRACKING))
