@@ -32,6 +32,7 @@ from ssme_envs.cli_identify import identify_engine as _identify_engine
 from ssme_envs.cli_identify import identify_nozzle as _identify_nozzle
 from ssme_envs.cli_identify import validate_engine as _validate_engine
 from ssme_envs.cli_learn import add_learning_commands, train_command, tune_command
+from ssme_envs.outputs import check_inputs_outside
 
 OUTPUT_NOTE = (
     "--out is built in a fresh directory beside it and swapped in when the run succeeds: an earlier "
@@ -263,7 +264,29 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _inputs(args: argparse.Namespace) -> dict[str, str | Path]:
+    """The files and directories a command reads, by option (to keep them out of its --out)."""
+    found: dict[str, str | Path] = {}
+    for key in ("data", "validate", "model", "config"):
+        value = getattr(args, key, None)
+        for i, path in enumerate(value if isinstance(value, list) else [value]):
+            if path is not None:
+                found[f"--{key}" + (f" #{i + 1}" if isinstance(value, list) and len(value) > 1 else "")] = (
+                    path
+                )
+    if args.command == "evaluate":
+        if args.plant is not None and Path(args.plant).exists():
+            found["--plant"] = args.plant
+        for spec in (args.controllers or "").split(","):
+            run = spec.partition(":")[2]
+            if run and Path(run).exists():
+                found[f"--controllers {spec}"] = run
+    return found
+
+
 def _dispatch(args: argparse.Namespace) -> int:
+    if getattr(args, "out", None) is not None and args.command != "tune" and args.command != "bench":
+        check_inputs_outside(args.out, _inputs(args))
     if args.command == "identify":
         return (_identify_engine if args.plant == "engine" else _identify_nozzle)(args)
     if args.command == "bench":

@@ -273,6 +273,19 @@ def holds_run(out: str | Path) -> bool:
     return (Path(out) / MARKER).is_file()
 
 
+def check_inputs_outside(out: str | Path, inputs: dict[str, str | Path]) -> None:
+    """OutputError when an input file or directory lies in ``out``, which the run replaces (with
+    every file in it) once it succeeds; ``inputs`` maps each input's name (the option) to its path."""
+    target = os.path.realpath(out)
+    for option, path in inputs.items():
+        where = os.path.realpath(path)
+        if where == target or where.startswith(target.rstrip(os.sep) + os.sep):
+            raise OutputError(
+                f"{option} {path} lies in --out {out}, which this run replaces with its own files: "
+                "choose another --out or move the input out of it"
+            )
+
+
 @contextmanager
 def run_directory(out: str | Path, stage: bool = True) -> Iterator[Path]:
     """The directory a command writes into, locked; swapped in for ``out`` when the block ends.
@@ -340,6 +353,7 @@ __all__ = [
     "OutputError",
     "atomic_write",
     "check_file_target",
+    "check_inputs_outside",
     "check_target",
     "directory_lock",
     "holds_run",
