@@ -163,7 +163,7 @@ def build_parser() -> argparse.ArgumentParser:
         "end early, resets timed too) (default: %(default)s)",
     )
     bench.add_argument("--env", action="append", help="env id to measure (repeatable; default: all)")
-    bench.add_argument("--out", type=Path, help="also write the table to this markdown file")
+    bench.add_argument("--out", help="also write the table to this markdown file")
 
     evaluate = commands.add_parser(
         "evaluate",

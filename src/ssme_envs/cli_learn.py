@@ -74,7 +74,7 @@ def add_learning_commands(commands: Any) -> None:
     tune.add_argument(
         "--eval-episodes", type=integer, default=10, help="episodes per evaluation (default: %(default)s)"
     )
-    tune.add_argument("--out", type=Path, help="write the best trial's config (TOML) to this file")
+    tune.add_argument("--out", help="write the best trial's config (TOML) to this file")
 
 
 def train_command(args: argparse.Namespace) -> int:

@@ -102,6 +102,8 @@ def check_file_target(path: str | Path, option: str = "--out") -> None:
     special file) in an existing directory that takes a new file (tried, not guessed from
     permission bits, which neither root nor a read-only mount honour). For a command to check
     before its long work rather than fail at its end."""
+    if os.path.basename(str(path)) in ("", ".", ".."):  # Path() would drop a trailing "/"
+        raise OutputError(f"{option} {path}: must be a file, and this names a directory")
     target = _file_target(path)
     if target.is_dir() or not target.parent.is_dir():
         raise OutputError(f"{option} {path}: must be a file in an existing directory")
