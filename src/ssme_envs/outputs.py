@@ -97,12 +97,18 @@ def _file_target(path: str | Path) -> Path:
     return target
 
 
+def names_directory(path: str | Path) -> bool:
+    """Whether ``path`` names a directory by its form: a trailing "/", "/." or "/.." (which
+    ``Path()`` and ``realpath`` drop, so a file would take the directory's name)."""
+    return os.path.basename(str(path)) in ("", ".", "..")
+
+
 def check_file_target(path: str | Path, option: str = "--out") -> None:
     """OutputError unless :func:`atomic_write` can write ``path``: a file (not a directory or a
     special file) in an existing directory that takes a new file (tried, not guessed from
     permission bits, which neither root nor a read-only mount honour). For a command to check
     before its long work rather than fail at its end."""
-    if os.path.basename(str(path)) in ("", ".", ".."):  # Path() would drop a trailing "/"
+    if names_directory(path):
         raise OutputError(f"{option} {path}: must be a file, and this names a directory")
     target = _file_target(path)
     if target.is_dir() or not target.parent.is_dir():
@@ -359,6 +365,7 @@ __all__ = [
     "check_target",
     "directory_lock",
     "holds_run",
+    "names_directory",
     "os_error_text",
     "output_directory",
     "run_directory",

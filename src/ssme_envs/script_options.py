@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import NoReturn
 
 from ssme_envs.cli_checks import check_episodes, integer, number, one_line
-from ssme_envs.outputs import OutputError, check_file_target
+from ssme_envs.outputs import OutputError, check_file_target, names_directory
 
 _OUT = "--out"  # the option named in check_file_target's messages (removed from them here)
 
@@ -159,7 +159,7 @@ def output_file(text: str) -> Path:
     path = Path(text)
     if path.is_dir():
         raise argparse.ArgumentTypeError(f"must be a file, got the directory {text!r}")
-    if os.path.basename(text) in ("", ".", ".."):  # Path() and realpath() drop a trailing "/"
+    if names_directory(text):
         raise argparse.ArgumentTypeError(f"must be a file, got {text!r}, which names a directory")
     parent = path.parent
     if not parent.is_dir():
