@@ -17,11 +17,14 @@ unpickles. SB3's own ``.zip`` files unpickle on load (a crafted zip runs code), 
 
 from __future__ import annotations
 
+import errno
 import hashlib
 import inspect
 import itertools
 import json
 import math
+import os
+import stat
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -29,6 +32,8 @@ from typing import Any
 import numpy as np
 
 from agents.residual import Residual, check_residual
+from ssme_envs.input_files import FileTooLarge, NotRegularFile, read_bounded
+from ssme_envs.models.statespace_json import read_json
 from ssme_envs.outputs import atomic_write
 
 FORMAT = "ssme-envs/policy"
@@ -54,6 +59,28 @@ _POLICY_KEYS = {"format", "version", "algo", "env", "policy", "policy_kwargs", "
                 "action_space", "weights_sha256", "residual"}  # fmt: skip
 _SPACE_KEYS = {"type", "shape", "dtype", "low", "high"}
 _NORMALIZATION_KEYS = {"mean", "var", "count", "clip", "epsilon"}
+# The shipped policies' weights (agents/policies, experiments/tried) are 10-130 kB; SB3 MLP policies
+# of any size one would train here stay below a few MB. 256 MiB (64 M float32 weights) is far above
+# all of them and keeps a wrong path (a disk image, a sparse file) from being read into memory whole.
+MAX_WEIGHTS_BYTES = 256 * 2**20
+# SB3's VecNormalize hands the policy clip((obs - mean) / sqrt(var + epsilon), -clip, clip) as float32.
+# clip: the bound in standard deviations (SB3's default 10). It must be finite and fit float32 (else
+# the cast overflows to inf, and inf becomes NaN in the network); below 1e-3 every observation is
+# squashed to +-clip, and below float32's smallest numbers to 0: the policy would see (almost) only
+# constants, a silently wrong normalization.
+CLIP_RANGE = (1e-3, float(np.finfo(np.float32).max))
+# epsilon: keeps the divisor above 0 for a constant observation (SB3's default 1e-8). Above 1 it
+# swamps the variance of any observation of unit scale or less and squashes it towards 0 (at 1e308 or
+# inf every observation becomes 0); below 1e-12 a constant observation is scaled by more than 1e6,
+# amplifying its float noise to the clip bound. Both are far from any real VecNormalize setting.
+EPSILON_RANGE = (1e-12, 1.0)
+_SPECIAL_KINDS = (
+    (stat.S_ISDIR, "a directory"),
+    (stat.S_ISFIFO, "a FIFO (named pipe)"),
+    (stat.S_ISCHR, "a character device"),
+    (stat.S_ISBLK, "a block device"),
+    (stat.S_ISSOCK, "a socket"),
+)
 
 
 def write_atomic(path: Path, data: bytes | str) -> None:
@@ -89,7 +116,9 @@ class Normalization:
     def normalize(self, obs: np.ndarray) -> np.ndarray:
         """Normalized observations as float32 (what the policy was trained on)."""
         scale = 1.0 / np.sqrt(self.var + self.epsilon)
-        return np.clip((obs - self.mean) * scale, -self.clip, self.clip).astype(np.float32)
+        # an overflow to +-inf (a huge observation minus a huge mean) is clipped to +-clip: no warning
+        with np.errstate(over="ignore"):
+            return np.clip((obs - self.mean) * scale, -self.clip, self.clip).astype(np.float32)
 
 
 @dataclass(frozen=True)
@@ -104,13 +133,10 @@ class LoadedPolicy:
     residual: Residual | None = None  # a residual policy's base controller and scale (agents.residual)
 
 
-def _load_json(path: Path, what: str) -> dict[str, Any]:
-    try:
-        data = json.loads(path.read_text())
-    except OSError as exc:
-        raise ValueError(f"cannot read {what} {path}: {exc.strerror}") from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise ValueError(f"{path}: not valid JSON ({exc})") from None
+def _load_json(path: Path) -> dict[str, Any]:
+    """A JSON object from a regular file of at most the package's JSON limit (``read_json``: a FIFO,
+    device, directory, oversized file, deep nesting or overlong number is a ValueError naming it)."""
+    data = read_json(path)
     if not isinstance(data, dict):
         raise ValueError(f"{path}: expected a JSON object, got {type(data).__name__}")
     return data
@@ -125,18 +151,36 @@ def _check_keys(data: dict[str, Any], known: set[str], required: set[str], where
         raise ValueError(f"{where}: missing field(s) {', '.join(missing)}")
 
 
+def _finite(value: Any) -> float | None:
+    """``value`` as a float if it is a finite JSON number (not a bool, not an integer beyond float's
+    range), else None."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return None
+    try:
+        number = float(value)
+    except OverflowError:  # an integer of more than 308 digits
+        return None
+    return number if math.isfinite(number) else None
+
+
+def _short(value: Any) -> str:
+    """``repr(value)``, cut short (a 4000-digit integer in an error line helps nobody)."""
+    text = repr(value)
+    return text if len(text) <= 40 else f"{text[:37]}..."
+
+
 def _numbers(value: Any, where: str) -> list[float]:
     """A JSON list of numbers (non-finite ones written "inf", "-inf")."""
     if not isinstance(value, list):
         raise ValueError(f"{where} must be a list of numbers")
     out = []
     for v in value:
-        if v in ("inf", "-inf"):
+        if isinstance(v, str) and v in ("inf", "-inf"):
             out.append(float(v))
-        elif isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v):
-            out.append(float(v))
+        elif (number := _finite(v)) is not None:
+            out.append(number)
         else:
-            raise ValueError(f"{where} must be a list of numbers, got {v!r}")
+            raise ValueError(f"{where} must be a list of numbers, got {_short(v)}")
     return out
 
 
@@ -171,6 +215,13 @@ def decode_space(data: Any, where: str) -> Any:
     if len(low) != size or len(high) != size:
         raise ValueError(f"{where}: low and high need {size} values each for shape {shape}")
     dtype = np.dtype(data["dtype"])
+    largest = float(np.finfo(dtype).max)
+    for name, values in (("low", low), ("high", high)):
+        for i, v in enumerate(values):
+            if math.isfinite(v) and abs(v) > largest:  # the cast would overflow to inf (with a warning)
+                raise ValueError(
+                    f"{where}.{name}[{i}] = {v!r} does not fit {dtype.name} (at most {largest:g})"
+                )
     low_array, high_array = np.array(low, dtype).reshape(shape), np.array(high, dtype).reshape(shape)
     if np.any(low_array > high_array):
         raise ValueError(f"{where}: low exceeds high")
@@ -212,13 +263,13 @@ def _decode_kwargs(data: Any, policy_class: Any, where: str) -> dict[str, Any]:
         ok = {
             "bool": isinstance(value, bool),
             "bool?": value is None or isinstance(value, bool),
-            "number": isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value),
+            "number": _finite(value) is not None,
             "int": type(value) is int and 0 < value <= 16,
             "activation": value in ACTIVATIONS,
             "net_arch": _valid_net_arch(value),
         }[kind]
         if not ok:
-            raise ValueError(f"{where}.{key}: invalid value {value!r}")
+            raise ValueError(f"{where}.{key}: invalid value {_short(value)}")
         kwargs[key] = getattr(torch.nn, value) if kind == "activation" else value
     return kwargs
 
@@ -268,7 +319,13 @@ def read_policy_json(directory: Path) -> dict[str, Any]:
         raise ValueError(
             f"{directory}: no such policy directory (one holds {POLICY_JSON}, {WEIGHTS}, {NORMALIZATION})"
         )
-    missing = [name for name in (POLICY_JSON, WEIGHTS, NORMALIZATION) if not (directory / name).is_file()]
+    problems = {name: _file_problem(directory / name) for name in (POLICY_JSON, WEIGHTS, NORMALIZATION)}
+    special = [
+        f"{name} is {problem}" for name, problem in problems.items() if problem not in (None, "missing")
+    ]
+    if special:
+        raise ValueError(f"{directory}: not a trained policy ({', '.join(special)}, not a regular file)")
+    missing = [name for name, problem in problems.items() if problem == "missing"]
     if missing:
         hint = ""
         if POLICY_JSON in missing and (directory / "model.zip").is_file():
@@ -276,9 +333,10 @@ def read_policy_json(directory: Path) -> dict[str, Any]:
                     f"python -m agents.policy_zip {directory} --allow-pickle")  # fmt: skip
         raise ValueError(f"{directory}: not a trained policy (missing {', '.join(missing)}){hint}")
     path = directory / POLICY_JSON
-    meta = _load_json(path, "policy")
+    meta = _load_json(path)
     _check_keys(meta, _POLICY_KEYS, _POLICY_KEYS - {"residual"}, str(path))
-    if meta["format"] != FORMAT or meta["version"] != VERSION:
+    # type(...) is int: True == 1 would otherwise pass as version 1
+    if meta["format"] != FORMAT or type(meta["version"]) is not int or meta["version"] != VERSION:
         raise ValueError(f"{path}: not an {FORMAT} v{VERSION} file")
     if meta["algo"] not in ALGOS or meta["policy"] != "MlpPolicy" or not isinstance(meta["env"], str):
         raise ValueError(f"{path}: needs algo ({', '.join(ALGOS)}), policy MlpPolicy and an env id")
@@ -286,6 +344,10 @@ def read_policy_json(directory: Path) -> dict[str, Any]:
         entry = meta["residual"]
         if not isinstance(entry, dict) or set(entry) != set(Residual._fields):
             raise ValueError(f"{path}: residual must be an object with {', '.join(Residual._fields)}")
+        if type(entry["scale"]) is int and _finite(entry["scale"]) is None:  # beyond float's range
+            raise ValueError(
+                f"{path}: residual: scale must be a number in (0, 2], got an integer beyond float's range"
+            )
         meta["residual"] = check_residual(entry["base"], entry["scale"], meta["env"], f"{path}: residual")
     return meta
 
@@ -306,7 +368,7 @@ def load_policy(directory: Path) -> LoadedPolicy:
     if normalization.mean.shape != observation_space.shape:
         raise ValueError(f"{directory / NORMALIZATION}: {normalization.mean.shape[0]} means for the "
                          f"observation space of shape {observation_space.shape}")  # fmt: skip
-    raw = (directory / WEIGHTS).read_bytes()
+    raw = _read_weights(directory / WEIGHTS)
     if hashlib.sha256(raw).hexdigest() != meta["weights_sha256"]:
         raise ValueError(f"{directory / WEIGHTS}: its SHA-256 differs from the one in {POLICY_JSON}")
     try:
@@ -320,6 +382,36 @@ def load_policy(directory: Path) -> LoadedPolicy:
         raise ValueError(f"{where}: cannot build {policy_class.__name__} ({exc})") from None
     _load_state(policy, tensors, directory / WEIGHTS)
     return LoadedPolicy(policy, meta["algo"], meta["env"], normalization, directory, meta.get("residual"))
+
+
+def _file_problem(path: Path) -> str | None:
+    """None for a regular file (symlinks followed), "missing", or what ``path`` is instead (a
+    directory, a FIFO, a symbolic link loop, ...); nothing is opened (a FIFO would block)."""
+    try:
+        mode = os.stat(path).st_mode
+    except FileNotFoundError:
+        return "a broken symbolic link" if os.path.islink(path) else "missing"
+    except OSError as exc:  # other errors (permissions, ...) are named by the read that follows
+        return "a symbolic link loop" if exc.errno == errno.ELOOP else None
+    if stat.S_ISREG(mode):
+        return None
+    return next((kind for test, kind in _SPECIAL_KINDS if test(mode)), "a special file")
+
+
+def _read_weights(path: Path) -> bytes:
+    """The bytes of ``policy.safetensors``, a regular file of at most :data:`MAX_WEIGHTS_BYTES`."""
+    try:
+        return read_bounded(path, MAX_WEIGHTS_BYTES)
+    except FileNotFoundError:
+        raise ValueError(f"{path}: no such file") from None
+    except NotRegularFile as exc:
+        kind = "a FIFO (named pipe)" if exc.kind == "a FIFO" else exc.kind
+        raise ValueError(f"{path}: not a safetensors file: it is {kind}, not a regular file") from None
+    except FileTooLarge:
+        raise ValueError(f"{path}: larger than {MAX_WEIGHTS_BYTES // 2**20} MiB, too large for the "
+                         "weights of a policy") from None  # fmt: skip
+    except OSError as exc:
+        raise ValueError(f"{path}: cannot read ({exc.strerror or exc})") from None
 
 
 def _check_size(net_arch: list[int] | dict[str, list[int]], stored: int, where: str) -> None:
@@ -357,16 +449,63 @@ def save_normalization(venv: Any, path: Path) -> None:
 
 def read_normalization(path: Path) -> Normalization:
     """The checked statistics of a ``normalization.json``; ValueError naming the problem."""
-    data = _load_json(Path(path), "normalization")
+    data = _load_json(Path(path))
     _check_keys(data, _NORMALIZATION_KEYS, _NORMALIZATION_KEYS - {"count"}, str(path))
     mean, var = _numbers(data["mean"], f"{path}: mean"), _numbers(data["var"], f"{path}: var")
-    scalars = {key: data.get(key, 1e-4) for key in ("count", "clip", "epsilon")}
-    bad = [v for v in scalars.values() if isinstance(v, bool) or not isinstance(v, int | float) or not v > 0]
-    if len(mean) != len(var) or not mean or bad or not all(np.isfinite(mean + var)) or min(var) < 0:
-        raise ValueError(f"{path}: mean and var must be finite lists of one length (var >= 0), "
-                         "count, clip and epsilon positive numbers")  # fmt: skip
-    return Normalization(np.array(mean), np.array(var), float(scalars["count"]),
-                         float(scalars["clip"]), float(scalars["epsilon"]))  # fmt: skip
+    if len(mean) != len(var) or not mean or not all(np.isfinite(mean + var)) or min(var) < 0:
+        raise ValueError(f"{path}: mean and var must be finite lists of one length (var >= 0)")
+    count = _finite(data.get("count", 1e-4))  # SB3's RunningMeanStd starts from 1e-4
+    if count is None or not count > 0:
+        raise ValueError(f"{path}: count must be a finite positive number, got {_short(data.get('count'))}")
+    scalars = {}
+    for key, (low, high) in (("clip", CLIP_RANGE), ("epsilon", EPSILON_RANGE)):
+        value = _finite(data[key])
+        if value is None or not low <= value <= high:
+            raise ValueError(f"{path}: {key} must be a finite positive number in [{low:g}, {high:g}], "
+                             f"got {_short(data[key])}")  # fmt: skip
+        scalars[key] = value
+    return Normalization(np.array(mean), np.array(var), count, scalars["clip"], scalars["epsilon"])
+
+
+def check_sb3_zip(path: Path) -> None:
+    """Before SB3 opens an SB3 ``.zip`` (with ``allow_pickle``): ValueError naming ``path`` unless it
+    is a regular file, or naming the ``normalization.json`` beside it if that one does not read
+    (so that no error of ours is raised from inside SB3's load: see :func:`sb3_zip_error`)."""
+    path = Path(path)
+    problem = _file_problem(path)
+    if problem == "missing":
+        raise ValueError(f"{path}: no such file")
+    if problem is not None:
+        raise ValueError(f"{path}: not an SB3 zip: it is {problem}, not a regular file")
+    beside = path.parent / NORMALIZATION
+    problem = _file_problem(beside)
+    if problem is None:
+        read_normalization(beside)
+    elif problem != "missing":  # not skipped: the policy would see unnormalized observations
+        raise ValueError(f"{beside}: not valid JSON: it is {problem}, not a regular file")
+
+
+def sb3_zip_error(path: Path, algo: str, exc: Exception) -> ValueError:
+    """The ValueError naming ``path`` for what SB3's ``load`` raised on a damaged zip: it raises
+    KeyError, AssertionError, AttributeError, JSON or UnicodeDecodeErrors, or a ValueError of its
+    own, none naming the file or the problem in the user's terms."""
+    import zipfile
+
+    if isinstance(exc.__cause__, zipfile.BadZipFile):
+        return ValueError(f"{path}: not an SB3 zip: not a zip file")
+    if isinstance(exc, json.JSONDecodeError):
+        detail = f"its data entry is not valid JSON ({exc})"
+    elif isinstance(exc, UnicodeDecodeError):
+        detail = "its data entry is not UTF-8 text"
+    elif isinstance(exc, RecursionError):
+        detail = "its data entry is nested too deeply"
+    else:
+        text = exc.args[0] if isinstance(exc, KeyError) and exc.args else str(exc)  # KeyError quotes it
+        detail = str(text) or type(exc).__name__
+    detail = " ".join(detail.split())  # one line for the CLI's error line
+    if len(detail) > 300:
+        detail = detail[:297] + "..."
+    return ValueError(f"{path}: cannot load it as an SB3 {algo} zip ({detail})")
 
 
 def to_vec_normalize(path: Path, venv: Any, training: bool = False, norm_reward: bool = False) -> Any:

@@ -4,9 +4,16 @@ import base64
 import contextlib
 import hashlib
 import json
+import math
 import os
 import pickle
+import re
 import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import warnings
 import zipfile
 from pathlib import Path
 
@@ -16,8 +23,10 @@ import pytest
 import safetensors.torch
 import stable_baselines3
 import torch
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
-from agents import parse_controller
+from agents import parse_controller, policy_files
 from agents.policy_files import (
     PICKLE_WARNING,
     load_policy,
@@ -32,6 +41,7 @@ from ssme_envs.cli import main
 from ssme_envs.envs.sb3_adapter import make_sb3_vec_env
 
 NOZZLE = "ssme_envs/NozzleTVC-v0"
+REPO = Path(__file__).resolve().parents[1]
 TRACKING = "ssme_envs/EngineTracking-v0"
 
 
@@ -287,3 +297,313 @@ def test_writes_are_atomic(tmp_path, monkeypatch):
     with pytest.raises(OSError, match="disk full"):
         write_atomic(target, "new")
     assert target.read_text() == "old" and sorted(p.name for p in tmp_path.iterdir()) == ["policy.json"]
+
+
+# --- bounded reads, special files, nesting, number ranges, damaged SB3 zips -----------------------
+
+# float32's largest value, (2 - 2**-23) * 2**127, written out rather than taken from numpy
+FLOAT32_MAX = 3.4028234663852886e38
+POLICY_DIRS = sorted(
+    p for root in ("agents/policies", "experiments/tried") for p in (REPO / root).iterdir() if p.is_dir()
+)
+
+
+@contextlib.contextmanager
+def _no_hang(seconds: float = 10.0):
+    """Fail instead of blocking for ever (a FIFO opened for reading waits for a writer)."""
+
+    def fail(*args):
+        raise TimeoutError(f"blocked for {seconds} s")
+
+    previous = signal.signal(signal.SIGALRM, fail)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
+
+
+def _make_special(path: Path, kind: str) -> None:
+    path.unlink(missing_ok=True)
+    if kind == "a directory":
+        path.mkdir()
+    elif kind == "a FIFO (named pipe)":
+        os.mkfifo(path)
+    else:  # a link to itself
+        os.symlink(path.name, path)
+
+
+@pytest.mark.parametrize("name", ["policy.json", "policy.safetensors", "normalization.json"])
+@pytest.mark.parametrize("kind", ["a directory", "a FIFO (named pipe)", "a symbolic link loop"])
+def test_a_special_file_in_a_policy_directory_is_named_as_such(tmp_path, name, kind):
+    run = _shipped_copy(tmp_path)
+    _make_special(run / name, kind)
+    with _no_hang(), pytest.raises(ValueError) as info:
+        load_policy(run)
+    assert str(info.value) == f"{run}: not a trained policy ({name} is {kind}, not a regular file)"
+
+
+@pytest.mark.parametrize(
+    ("target", "kind"),
+    [(os.devnull, "a character device"), ("fifo", "a FIFO (named pipe)"), ("dir", "a directory")],
+)
+def test_read_normalization_refuses_devices_fifos_and_directories_without_reading(tmp_path, target, kind):
+    path = Path(target) if target == os.devnull else tmp_path / target
+    if target == "fifo":
+        os.mkfifo(path)
+    elif target == "dir":
+        path.mkdir()
+    with (
+        _no_hang(),
+        pytest.raises(ValueError, match=f"^{path}: .*it is {re.escape(kind)}, not a regular file$"),
+    ):
+        read_normalization(path)
+
+
+def test_weights_over_the_bound_are_refused_before_reading(tmp_path, monkeypatch):
+    # the bound: a round 256 MiB, far above every policy shipped or tried (all are well under 1 MiB)
+    assert policy_files.MAX_WEIGHTS_BYTES == 256 * 1024 * 1024
+    assert all((d / "policy.safetensors").stat().st_size < 1024 * 1024 for d in POLICY_DIRS)
+    run = _shipped_copy(tmp_path)
+    with open(run / "policy.safetensors", "r+b") as fh:  # sparse: no disk, no memory
+        fh.truncate(3 * 1024**3)
+    with pytest.raises(ValueError, match=r"policy\.safetensors: larger than 256 MiB"):
+        load_policy(run)
+    # the boundary, on a small bound: exactly the limit is read (and here fails its hash), one more is not
+    monkeypatch.setattr(policy_files, "MAX_WEIGHTS_BYTES", 1000)
+    (run / "policy.safetensors").write_bytes(b"\0" * 1000)
+    with pytest.raises(ValueError, match="SHA-256 differs"):
+        load_policy(run)
+    (run / "policy.safetensors").write_bytes(b"\0" * 1001)
+    with pytest.raises(ValueError, match=r"policy\.safetensors: larger than 0 MiB"):
+        load_policy(run)
+
+
+@pytest.mark.parametrize("name", ["policy.json", "normalization.json"])
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("[" * 200_000, "nested too deeply"),
+        ('{"mean": [' + "7" * 5000 + "]}", "a number in it is too long to read"),
+        ("\xff\xfe", "not valid JSON"),
+    ],
+    ids=["deep", "5000-digits", "not-utf8"],
+)
+def test_json_that_python_cannot_parse_is_a_value_error_naming_the_file(tmp_path, name, text, message):
+    run = _shipped_copy(tmp_path)
+    (run / name).write_bytes(text.encode("latin-1"))
+    with pytest.raises(ValueError, match=f"^{re.escape(str(run / name))}: {message}"):
+        load_policy(run)
+
+
+def _normalization(tmp: Path, **change) -> Path:
+    data = {"mean": [0.5, -2.0], "var": [4.0, 0.0], "count": 100.0, "clip": 10.0, "epsilon": 1e-8}
+    data.update(change)
+    path = tmp / "normalization.json"
+    path.write_text(json.dumps(data))
+    return path
+
+
+@pytest.mark.parametrize(
+    ("key", "value"),
+    [
+        ("epsilon", math.inf), ("epsilon", 1e308), ("epsilon", 0.0), ("epsilon", -1e-8), ("epsilon", 1e-300),
+        ("epsilon", 2.0), ("epsilon", True), ("epsilon", "1e-8"), ("epsilon", math.nan),
+        ("clip", math.inf), ("clip", 1e-300), ("clip", 1e-4), ("clip", 1e308), ("clip", 4e38), ("clip", True),
+        ("clip", None), ("count", math.inf), ("count", 0), ("count", True), ("count", 10**400),
+        ("mean", [math.nan, 0.0]), ("var", [1.0, -1.0]), ("var", [1.0, "inf"]), ("mean", [True, 0.0]),
+    ],
+    ids=lambda v: repr(v)[:20],
+)  # fmt: skip
+def test_normalization_values_that_would_make_it_meaningless_are_refused(tmp_path, key, value):
+    path = _normalization(tmp_path, **{key: value})
+    with pytest.raises(ValueError, match=f"^{re.escape(str(path))}: (mean and var|{key}) must be"):
+        read_normalization(path)
+
+
+def test_zero_variance_with_a_tiny_epsilon_and_a_huge_clip_cannot_reach_the_policy_as_nan(tmp_path):
+    # the audit's case: 1 / sqrt(0 + 1e-300) = 1e150 times any offset, kept by a clip of 1e308, was
+    # cast to float32 as inf (with a RuntimeWarning) and the network turned it into NaN
+    path = _normalization(tmp_path, var=[0.0, 0.0], epsilon=1e-300, clip=1e308)
+    with pytest.raises(ValueError, match=r"(epsilon|clip) must be"):
+        read_normalization(path)
+
+
+@settings(max_examples=150, deadline=None)
+@given(
+    key=st.sampled_from(["clip", "epsilon"]),
+    value=st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.integers(-(10**400), 10**400)),
+)
+def test_clip_and_epsilon_are_accepted_exactly_in_their_ranges(key, value):
+    # the ranges the loader documents: clip in [1e-3, float32 max], epsilon in [1e-12, 1]
+    low, high = {"clip": (1e-3, FLOAT32_MAX), "epsilon": (1e-12, 1.0)}[key]
+    accept = low <= value <= high  # False for NaN; exact for integers of any size
+    with tempfile.TemporaryDirectory() as tmp:
+        path = _normalization(Path(tmp), **{key: value})
+        if accept:
+            assert getattr(read_normalization(path), key) == float(value)
+        else:
+            with pytest.raises(ValueError, match=f"{key} must be a finite positive number"):
+                read_normalization(path)
+
+
+_finite = st.floats(allow_nan=False, allow_infinity=False)
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    mean=_finite,
+    var=st.floats(0.0, 1.7e308),
+    clip=st.floats(1e-3, FLOAT32_MAX),
+    epsilon=st.floats(1e-12, 1.0),
+    obs=st.lists(st.floats(allow_nan=False), min_size=1, max_size=8),
+)
+def test_any_accepted_normalization_hands_the_policy_finite_clipped_float32(mean, var, clip, epsilon, obs):
+    with tempfile.TemporaryDirectory() as tmp:
+        stats = read_normalization(
+            _normalization(Path(tmp), mean=[mean], var=[var], clip=clip, epsilon=epsilon)
+        )
+    x = np.array(obs).reshape(-1, 1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no overflow warning on the way
+        out = stats.normalize(x)
+    assert out.dtype == np.float32 and np.all(np.isfinite(out))
+    assert np.all(np.abs(out) <= np.float32(clip))
+    # the sign of each offset from the mean survives (0 where the scaled offset underflows)
+    assert np.all(out * np.sign(x - mean) >= 0)
+
+
+def test_every_shipped_and_tried_normalization_still_loads():
+    assert len(POLICY_DIRS) >= 20
+    for directory in POLICY_DIRS:
+        stats = read_normalization(directory / "normalization.json")
+        assert stats.clip == 10.0 and stats.epsilon == 1e-8  # SB3's VecNormalize settings in our configs
+
+
+@pytest.mark.parametrize("version", [True, 1.0, "1", None])
+def test_the_version_must_be_the_integer_one(tmp_path, version):
+    run = _shipped_copy(tmp_path)
+    _edit_json(run / "policy.json", lambda d: d.update(version=version))
+    with pytest.raises(ValueError, match="not an ssme-envs/policy v1 file"):
+        load_policy(run)
+
+
+@pytest.mark.parametrize(
+    ("field", "index", "value"),
+    [("low", 0, -1e308), ("high", 5, 3.5e38), ("low", 2, -(10**39))],
+    ids=["low-1e308", "high3.5e38", "low-int1e39"],
+)
+def test_space_bounds_beyond_float32_are_named_without_a_cast_warning(tmp_path, field, index, value):
+    run = _shipped_copy(tmp_path)
+    _edit_json(run / "policy.json", lambda d: d["observation_space"][field].__setitem__(index, value))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(
+            ValueError, match=rf"observation_space\.{field}\[{index}\] = .* does not fit float32"
+        ):
+            load_policy(run)
+
+
+def test_a_float64_space_keeps_bounds_float32_cannot_hold(tmp_path):
+    run = _shipped_copy(tmp_path)
+    _edit_json(run / "policy.json", lambda d: d["observation_space"].update(dtype="float64"))
+    _edit_json(run / "policy.json", lambda d: d["observation_space"]["low"].__setitem__(0, -1e308))
+    assert load_policy(run).policy.observation_space.low[0] == -1e308
+
+
+@pytest.mark.parametrize(
+    "change",
+    [
+        lambda d: d["policy_kwargs"].update(log_std_init=10**400),
+        lambda d: d.update(residual={"base": "pid", "scale": 10**400}),
+        lambda d: d["observation_space"]["low"].__setitem__(0, -(10**400)),
+    ],
+)
+def test_integers_beyond_float_range_are_value_errors(tmp_path, change):
+    run = _shipped_copy(tmp_path)
+    _edit_json(run / "policy.json", change)
+    with pytest.raises(ValueError, match=re.escape(str(run / "policy.json"))):
+        load_policy(run)
+
+
+def _zip(path: Path, members: dict[str, str | bytes] | bytes) -> Path:
+    if isinstance(members, bytes):
+        path.write_bytes(members)
+        return path
+    with zipfile.ZipFile(path, "w") as archive:
+        for name, data in members.items():
+            archive.writestr(name, data)
+    return path
+
+
+@pytest.mark.parametrize(
+    ("members", "problem"),
+    [
+        ({"data": "{}"}, "cannot load it as an SB3 ppo zip (The observation_space and action_space"),
+        ({}, "cannot load it as an SB3 ppo zip (No data found"),
+        ({"data": "not json"}, "cannot load it as an SB3 ppo zip (its data entry is not valid JSON"),
+        ({"data": "[1]"}, "cannot load it as an SB3 ppo zip ("),
+        ({"data": "[" * 200_000}, "cannot load it as an SB3 ppo zip (its data entry is nested too deeply)"),
+        ({"data": b"\xff\xfe"}, "cannot load it as an SB3 ppo zip (its data entry is not UTF-8 text)"),
+        (b"not a zip", "not an SB3 zip: not a zip file"),
+        (b"", "not an SB3 zip: not a zip file"),
+    ],
+    ids=[
+        "data-empty-object",
+        "no-members",
+        "data-not-json",
+        "data-list",
+        "data-deep",
+        "data-not-utf8",
+        "not-a-zip",
+        "empty-file",
+    ],
+)
+def test_a_damaged_sb3_zip_is_one_error_line_naming_it(tmp_path, capsys, members, problem):
+    bad = _zip(tmp_path / "bad.zip", members)
+    args = ["evaluate", "--env", NOZZLE, "--controllers", f"ppo:{bad}", "--allow-pickle",
+            "--scenario", "step", "--episodes", "1", "--out", str(tmp_path / "out")]  # fmt: skip
+    assert main(args) == 2
+    lines = capsys.readouterr().err.splitlines()
+    # the opt-in's warning, then the error: nothing else, no traceback
+    assert len(lines) == 2 and "can execute arbitrary code" in lines[0], lines
+    assert lines[1].startswith(f"error: {bad}: {problem}"), lines
+
+
+def test_a_damaged_sb3_zip_prints_no_warning_or_traceback_from_a_real_process(tmp_path):
+    bad = _zip(tmp_path / "bad.zip", {"data": "{}"})
+    code = "import sys; from ssme_envs.cli import main; sys.exit(main(sys.argv[1:]))"
+    args = ["evaluate", "--env", NOZZLE, "--controllers", f"ppo:{bad}", "--allow-pickle",
+            "--scenario", "step", "--episodes", "1", "--out", str(tmp_path / "out")]  # fmt: skip
+    proc = subprocess.run([sys.executable, "-c", code, *args], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 2
+    lines = proc.stderr.splitlines()
+    assert len(lines) == 2 and lines[1].startswith(f"error: {bad}: cannot load it as an SB3 ppo zip"), lines
+
+
+@pytest.mark.parametrize("kind", ["a directory", "a FIFO (named pipe)", "a symbolic link loop"])
+def test_an_sb3_zip_path_or_its_normalization_that_is_a_special_file_is_named(tmp_path, kind):
+    zip_path = tmp_path / "model.zip"
+    _make_special(zip_path, kind)
+    with (
+        _no_hang(),
+        pytest.raises(ValueError, match=f"^{zip_path}: not an SB3 zip: it is {re.escape(kind)}, not"),
+    ):
+        load_trained(zip_path, "ppo", allow_pickle=True)
+    zip_path = _zip(tmp_path / "other.zip", {"data": "{}"})
+    _make_special(tmp_path / "normalization.json", kind)
+    # refused, not skipped: the policy would otherwise see raw observations
+    with _no_hang(), pytest.raises(ValueError, match=f"normalization.json: .*it is {re.escape(kind)}"):
+        load_trained(zip_path, "ppo", allow_pickle=True)
+
+
+@pytest.mark.parametrize("error", [OSError(5, "Input/output error"), MemoryError()])
+def test_os_and_memory_errors_of_an_sb3_load_are_left_as_they_are(tmp_path, monkeypatch, capsys, error):
+    def fail(*args, **kwargs):
+        raise error
+
+    monkeypatch.setattr(stable_baselines3.PPO, "load", fail)
+    with pytest.raises(type(error)) as info:
+        load_trained(_zip(tmp_path / "m.zip", {"data": "{}"}), "ppo", allow_pickle=True)
+    assert info.value is error
