@@ -24,7 +24,6 @@ import itertools
 import json
 import math
 import os
-import stat
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -32,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from agents.residual import Residual, check_residual
-from ssme_envs.input_files import FileTooLarge, NotRegularFile, read_bounded
+from ssme_envs.input_files import read_or_refuse, special_kind
 from ssme_envs.models.statespace_json import read_json
 from ssme_envs.outputs import atomic_write
 
@@ -74,13 +73,6 @@ CLIP_RANGE = (1e-3, float(np.finfo(np.float32).max))
 # inf every observation becomes 0); below 1e-12 a constant observation is scaled by more than 1e6,
 # amplifying its float noise to the clip bound. Both are far from any real VecNormalize setting.
 EPSILON_RANGE = (1e-12, 1.0)
-_SPECIAL_KINDS = (
-    (stat.S_ISDIR, "a directory"),
-    (stat.S_ISFIFO, "a FIFO (named pipe)"),
-    (stat.S_ISCHR, "a character device"),
-    (stat.S_ISBLK, "a block device"),
-    (stat.S_ISSOCK, "a socket"),
-)
 
 
 def write_atomic(path: Path, data: bytes | str) -> None:
@@ -393,25 +385,13 @@ def _file_problem(path: Path) -> str | None:
         return "a broken symbolic link" if os.path.islink(path) else "missing"
     except OSError as exc:  # other errors (permissions, ...) are named by the read that follows
         return "a symbolic link loop" if exc.errno == errno.ELOOP else None
-    if stat.S_ISREG(mode):
-        return None
-    return next((kind for test, kind in _SPECIAL_KINDS if test(mode)), "a special file")
+    kind = special_kind(mode)
+    return "a FIFO (named pipe)" if kind == "a FIFO" else kind
 
 
 def _read_weights(path: Path) -> bytes:
     """The bytes of ``policy.safetensors``, a regular file of at most :data:`MAX_WEIGHTS_BYTES`."""
-    try:
-        return read_bounded(path, MAX_WEIGHTS_BYTES)
-    except FileNotFoundError:
-        raise ValueError(f"{path}: no such file") from None
-    except NotRegularFile as exc:
-        kind = "a FIFO (named pipe)" if exc.kind == "a FIFO" else exc.kind
-        raise ValueError(f"{path}: not a safetensors file: it is {kind}, not a regular file") from None
-    except FileTooLarge:
-        raise ValueError(f"{path}: larger than {MAX_WEIGHTS_BYTES // 2**20} MiB, too large for the "
-                         "weights of a policy") from None  # fmt: skip
-    except OSError as exc:
-        raise ValueError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    return read_or_refuse(path, MAX_WEIGHTS_BYTES, "a safetensors file", "the weights of a policy")
 
 
 def _check_size(net_arch: list[int] | dict[str, list[int]], stored: int, where: str) -> None:

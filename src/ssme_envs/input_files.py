@@ -50,8 +50,8 @@ def read_bounded(path: str | Path, max_bytes: int) -> bytes:
     fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_BINARY", 0))
     try:
         info = os.fstat(fd)  # before open(): it refuses a directory with an error of its own
-        if not stat.S_ISREG(info.st_mode):
-            kind = next((kind for test, kind in _KINDS if test(info.st_mode)), "a special file")
+        kind = special_kind(info.st_mode)
+        if kind is not None:
             raise NotRegularFile(kind)
         if info.st_size > max_bytes:
             raise FileTooLarge(path)
@@ -64,4 +64,27 @@ def read_bounded(path: str | Path, max_bytes: int) -> bytes:
     return data
 
 
-__all__ = ["FileTooLarge", "NotRegularFile", "read_bounded"]
+def special_kind(mode: int) -> str | None:
+    """What a file of ``st_mode`` ``mode`` is when it is not a regular file ("a FIFO", ...)."""
+    if stat.S_ISREG(mode):
+        return None
+    return next((kind for test, kind in _KINDS if test(mode)), "a special file")
+
+
+def read_or_refuse(path: str | Path, max_bytes: int, kind: str, too_large: str) -> bytes:
+    """:func:`read_bounded`, its errors a ValueError naming ``path``: "not {kind}: it is a FIFO
+    (named pipe), not a regular file", "larger than N MiB, too large for {too_large}", ..."""
+    try:
+        return read_bounded(path, max_bytes)
+    except FileNotFoundError:
+        raise ValueError(f"{path}: no such file") from None
+    except NotRegularFile as exc:
+        what = "a FIFO (named pipe)" if exc.kind == "a FIFO" else exc.kind
+        raise ValueError(f"{path}: not {kind}: it is {what}, not a regular file") from None
+    except FileTooLarge:
+        raise ValueError(f"{path}: larger than {max_bytes // 2**20} MiB, too large for {too_large}") from None
+    except OSError as exc:
+        raise ValueError(f"{path}: cannot read ({exc.strerror or exc})") from None
+
+
+__all__ = ["FileTooLarge", "NotRegularFile", "read_bounded", "read_or_refuse", "special_kind"]

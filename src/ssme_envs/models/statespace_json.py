@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ssme_envs.input_files import FileTooLarge, NotRegularFile, read_bounded
+from ssme_envs.input_files import read_or_refuse
 from ssme_envs.models.linear import describe, refuse_unknown_keys
 from ssme_envs.models.uncertainty import ParameterUncertainty, check_standard_errors
 
@@ -151,19 +151,7 @@ def save_engine_model(model: AlphaCanonicalModel, path: str | Path) -> None:
 def read_json(path: str | Path) -> Any:
     """Parse a JSON file; a missing, special or oversized file or bad JSON is a ValueError naming it."""
     path = Path(path)
-    try:
-        raw = read_bounded(path, MAX_JSON_BYTES)
-    except FileNotFoundError:
-        raise ValueError(f"{path}: no such file") from None
-    except NotRegularFile as exc:
-        kind = "a FIFO (named pipe)" if exc.kind == "a FIFO" else exc.kind
-        raise ValueError(f"{path}: not valid JSON: it is {kind}, not a regular file") from None
-    except FileTooLarge:
-        raise ValueError(
-            f"{path}: larger than {MAX_JSON_BYTES // 2**20} MiB, too large for a model file"
-        ) from None
-    except OSError as exc:
-        raise ValueError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    raw = read_or_refuse(path, MAX_JSON_BYTES, "valid JSON", "a model file")
     try:
         return json.loads(raw.decode("utf-8"))
     except RecursionError:
