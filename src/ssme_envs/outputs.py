@@ -284,6 +284,8 @@ def holds_run(out: str | Path) -> bool:
 def check_inputs_outside(out: str | Path, inputs: dict[str, str | Path]) -> None:
     """OutputError when an input file or directory lies in ``out``, which the run replaces (with
     every file in it) once it succeeds; ``inputs`` maps each input's name (the option) to its path."""
+    if not holds_run(out):  # only an earlier run is replaced; other contents are refused as they are
+        return
     target = os.path.realpath(out)
     for option, path in inputs.items():
         where = os.path.realpath(path)
