@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from agents.residual import Residual, check_residual
-from ssme_envs.input_files import read_or_refuse, special_kind
+from ssme_envs.input_files import read_or_refuse, special_kind, spelled_kind
 from ssme_envs.models.statespace_json import read_json
 from ssme_envs.outputs import atomic_write
 
@@ -386,7 +386,7 @@ def _file_problem(path: Path) -> str | None:
     except OSError as exc:  # other errors (permissions, ...) are named by the read that follows
         return "a symbolic link loop" if exc.errno == errno.ELOOP else None
     kind = special_kind(mode)
-    return "a FIFO (named pipe)" if kind == "a FIFO" else kind
+    return None if kind is None else spelled_kind(kind)
 
 
 def _read_weights(path: Path) -> bytes:

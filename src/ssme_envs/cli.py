@@ -271,9 +271,7 @@ def _inputs(args: argparse.Namespace) -> dict[str, str | Path]:
         value = getattr(args, key, None)
         for i, path in enumerate(value if isinstance(value, list) else [value]):
             if path is not None:
-                found[f"--{key}" + (f" #{i + 1}" if isinstance(value, list) and len(value) > 1 else "")] = (
-                    path
-                )
+                found[f"--{key}" if i == 0 else f"--{key} (#{i + 1})"] = path
     if args.command == "evaluate":
         if args.plant is not None and Path(args.plant).exists():
             found["--plant"] = args.plant
@@ -285,7 +283,7 @@ def _inputs(args: argparse.Namespace) -> dict[str, str | Path]:
 
 
 def _dispatch(args: argparse.Namespace) -> int:
-    if getattr(args, "out", None) is not None and args.command != "tune" and args.command != "bench":
+    if getattr(args, "out", None) is not None and args.command not in ("tune", "bench"):  # theirs: a file
         check_inputs_outside(args.out, _inputs(args))
     if args.command == "identify":
         return (_identify_engine if args.plant == "engine" else _identify_nozzle)(args)

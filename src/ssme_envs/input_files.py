@@ -71,6 +71,11 @@ def special_kind(mode: int) -> str | None:
     return next((kind for test, kind in _KINDS if test(mode)), "a special file")
 
 
+def spelled_kind(kind: str) -> str:
+    """A :class:`NotRegularFile` kind as the file readers' messages write it ("a FIFO (named pipe)")."""
+    return "a FIFO (named pipe)" if kind == "a FIFO" else kind
+
+
 def read_or_refuse(path: str | Path, max_bytes: int, kind: str, too_large: str) -> bytes:
     """:func:`read_bounded`, its errors a ValueError naming ``path``: "not {kind}: it is a FIFO
     (named pipe), not a regular file", "larger than N MiB, too large for {too_large}", ..."""
@@ -79,12 +84,11 @@ def read_or_refuse(path: str | Path, max_bytes: int, kind: str, too_large: str) 
     except FileNotFoundError:
         raise ValueError(f"{path}: no such file") from None
     except NotRegularFile as exc:
-        what = "a FIFO (named pipe)" if exc.kind == "a FIFO" else exc.kind
-        raise ValueError(f"{path}: not {kind}: it is {what}, not a regular file") from None
+        raise ValueError(f"{path}: not {kind}: it is {spelled_kind(exc.kind)}, not a regular file") from None
     except FileTooLarge:
         raise ValueError(f"{path}: larger than {max_bytes // 2**20} MiB, too large for {too_large}") from None
     except OSError as exc:
         raise ValueError(f"{path}: cannot read ({exc.strerror or exc})") from None
 
 
-__all__ = ["FileTooLarge", "NotRegularFile", "read_bounded", "read_or_refuse", "special_kind"]
+__all__ = ["FileTooLarge", "NotRegularFile", "read_bounded", "read_or_refuse", "special_kind", "spelled_kind"]

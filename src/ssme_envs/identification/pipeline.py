@@ -22,8 +22,6 @@ from ssme_envs.models.statespace import ENGINE_INPUTS, ENGINE_OUTPUTS, AlphaCano
 from ssme_envs.outputs import atomic_write
 from ssme_envs.signals import prbs, step_ramp_test_signal
 
-DEFAULT_INPUTS = ENGINE_INPUTS
-DEFAULT_OUTPUTS = ENGINE_OUTPUTS
 DEFAULT_SEED = 2024
 PRBS_AMPLITUDE = 0.01  # normalized valve travel; figure 3 of the paper stays within +-0.02
 IDENTIFICATION_PERIODS = 8  # 127-bit periods: 1016 samples, 40.6 s
@@ -37,8 +35,8 @@ class EngineRecord:
     u: np.ndarray
     y: np.ndarray
     dt: float
-    input_names: tuple[str, ...] = DEFAULT_INPUTS
-    output_names: tuple[str, ...] = DEFAULT_OUTPUTS
+    input_names: tuple[str, ...] = ENGINE_INPUTS
+    output_names: tuple[str, ...] = ENGINE_OUTPUTS
 
     @property
     def t(self) -> np.ndarray:
@@ -47,8 +45,8 @@ class EngineRecord:
 
 def read_record(
     path: str | Path,
-    inputs: Sequence[str] = DEFAULT_INPUTS,
-    outputs: Sequence[str] = DEFAULT_OUTPUTS,
+    inputs: Sequence[str] = ENGINE_INPUTS,
+    outputs: Sequence[str] = ENGINE_OUTPUTS,
     dt: float | None = None,
 ) -> EngineRecord:
     """Read an engine record from CSV; columns are chosen by name (see :func:`read_columns`)."""
