@@ -7,7 +7,7 @@ A policy directory (written by ``ssme-envs train``, or shipped in ``agents/polic
   SHA-256 of the weights;
 - ``policy.safetensors``: the policy's ``state_dict`` (actor and critics);
 - ``normalization.json``: the VecNormalize observation statistics (mean, var, count, clip,
-  epsilon); :func:`to_vec_normalize` turns it into SB3's own ``VecNormalize`` in one call;
+  epsilon), read and written by :mod:`agents.normalization`;
 - ``config.toml`` and ``training.json``: the resolved training config and the training summary.
 
 :func:`load_policy` rebuilds the SB3 policy from the JSON and loads the weights; nothing in it
@@ -17,29 +17,27 @@ unpickles. SB3's own ``.zip`` files unpickle on load (a crafted zip runs code), 
 
 from __future__ import annotations
 
-import errno
 import hashlib
 import inspect
 import itertools
 import json
 import math
-import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from agents.json_fields import check_keys, file_problem, finite, load_object, numbers, short
+from agents.normalization import NORMALIZATION, Normalization, read_normalization
 from agents.residual import Residual, check_residual
-from ssme_envs.input_files import read_or_refuse, special_kind, spelled_kind
-from ssme_envs.models.statespace_json import read_json
+from ssme_envs.input_files import read_or_refuse
 from ssme_envs.outputs import atomic_write
 
 FORMAT = "ssme-envs/policy"
 VERSION = 1
 POLICY_JSON = "policy.json"
 WEIGHTS = "policy.safetensors"
-NORMALIZATION = "normalization.json"
 ALGOS = ("ppo", "sac", "td3")
 ACTIVATIONS = ("Tanh", "ReLU", "ELU", "LeakyReLU", "GELU", "SiLU", "Sigmoid")
 PICKLE_WARNING = (
@@ -57,22 +55,10 @@ _TRAINING_ONLY = ("observation_space", "action_space", "lr_schedule", "optimizer
 _POLICY_KEYS = {"format", "version", "algo", "env", "policy", "policy_kwargs", "observation_space",
                 "action_space", "weights_sha256", "residual"}  # fmt: skip
 _SPACE_KEYS = {"type", "shape", "dtype", "low", "high"}
-_NORMALIZATION_KEYS = {"mean", "var", "count", "clip", "epsilon"}
 # The shipped policies' weights (agents/policies, experiments/tried) are 10-130 kB; SB3 MLP policies
 # of any size one would train here stay below a few MB. 256 MiB (64 M float32 weights) is far above
 # all of them and keeps a wrong path (a disk image, a sparse file) from being read into memory whole.
 MAX_WEIGHTS_BYTES = 256 * 2**20
-# SB3's VecNormalize hands the policy clip((obs - mean) / sqrt(var + epsilon), -clip, clip) as float32.
-# clip: the bound in standard deviations (SB3's default 10). It must be finite and fit float32 (else
-# the cast overflows to inf, and inf becomes NaN in the network); below 1e-3 every observation is
-# squashed to +-clip, and below float32's smallest numbers to 0: the policy would see (almost) only
-# constants, a silently wrong normalization.
-CLIP_RANGE = (1e-3, float(np.finfo(np.float32).max))
-# epsilon: keeps the divisor above 0 for a constant observation (SB3's default 1e-8). Above 1 it
-# swamps the variance of any observation of unit scale or less and squashes it towards 0 (at 1e308 or
-# inf every observation becomes 0); below 1e-12 a constant observation is scaled by more than 1e6,
-# amplifying its float noise to the clip bound. Both are far from any real VecNormalize setting.
-EPSILON_RANGE = (1e-12, 1.0)
 
 
 def write_atomic(path: Path, data: bytes | str) -> None:
@@ -95,25 +81,6 @@ def algorithm_class(name: str) -> Any:
 
 
 @dataclass(frozen=True)
-class Normalization:
-    """VecNormalize's observation statistics: ``(obs - mean) / sqrt(var + epsilon)`` clipped to
-    ``[-clip, clip]``; ``count`` is the number of observations behind them."""
-
-    mean: np.ndarray
-    var: np.ndarray
-    count: float
-    clip: float
-    epsilon: float
-
-    def normalize(self, obs: np.ndarray) -> np.ndarray:
-        """Normalized observations as float32 (what the policy was trained on)."""
-        scale = 1.0 / np.sqrt(self.var + self.epsilon)
-        # an overflow to +-inf (a huge observation minus a huge mean) is clipped to +-clip: no warning
-        with np.errstate(over="ignore"):
-            return np.clip((obs - self.mean) * scale, -self.clip, self.clip).astype(np.float32)
-
-
-@dataclass(frozen=True)
 class LoadedPolicy:
     """An SB3 policy ready to act, with where it came from."""
 
@@ -123,57 +90,6 @@ class LoadedPolicy:
     normalization: Normalization | None
     source: Path
     residual: Residual | None = None  # a residual policy's base controller and scale (agents.residual)
-
-
-def _load_json(path: Path) -> dict[str, Any]:
-    """A JSON object from a regular file of at most the package's JSON limit (``read_json``: a FIFO,
-    device, directory, oversized file, deep nesting or overlong number is a ValueError naming it)."""
-    data = read_json(path)
-    if not isinstance(data, dict):
-        raise ValueError(f"{path}: expected a JSON object, got {type(data).__name__}")
-    return data
-
-
-def _check_keys(data: dict[str, Any], known: set[str], required: set[str], where: str) -> None:
-    unknown = sorted(set(data) - known)
-    if unknown:
-        raise ValueError(f"{where}: unexpected field(s) {', '.join(unknown)}")
-    missing = sorted(required - set(data))
-    if missing:
-        raise ValueError(f"{where}: missing field(s) {', '.join(missing)}")
-
-
-def _finite(value: Any) -> float | None:
-    """``value`` as a float if it is a finite JSON number (not a bool, not an integer beyond float's
-    range), else None."""
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        return None
-    try:
-        number = float(value)
-    except OverflowError:  # an integer of more than 308 digits
-        return None
-    return number if math.isfinite(number) else None
-
-
-def _short(value: Any) -> str:
-    """``repr(value)``, cut short (a 4000-digit integer in an error line helps nobody)."""
-    text = repr(value)
-    return text if len(text) <= 40 else f"{text[:37]}..."
-
-
-def _numbers(value: Any, where: str) -> list[float]:
-    """A JSON list of numbers (non-finite ones written "inf", "-inf")."""
-    if not isinstance(value, list):
-        raise ValueError(f"{where} must be a list of numbers")
-    out = []
-    for v in value:
-        if isinstance(v, str) and v in ("inf", "-inf"):
-            out.append(float(v))
-        elif (number := _finite(v)) is not None:
-            out.append(number)
-        else:
-            raise ValueError(f"{where} must be a list of numbers, got {_short(v)}")
-    return out
 
 
 def _encode_numbers(array: np.ndarray) -> list[float | str]:
@@ -196,14 +112,14 @@ def decode_space(data: Any, where: str) -> Any:
 
     if not isinstance(data, dict):
         raise ValueError(f"{where} must be a JSON object")
-    _check_keys(data, _SPACE_KEYS, _SPACE_KEYS, where)
+    check_keys(data, _SPACE_KEYS, _SPACE_KEYS, where)
     shape = data["shape"]
     if data["type"] != "Box" or data["dtype"] not in ("float32", "float64"):
         raise ValueError(f"{where}: only float32/float64 Box spaces, got {data['type']} {data['dtype']}")
     if not (isinstance(shape, list) and shape and all(type(n) is int and n > 0 for n in shape)):
         raise ValueError(f"{where}.shape must be a list of positive integers, got {shape!r}")
     size = math.prod(shape)
-    low, high = _numbers(data["low"], f"{where}.low"), _numbers(data["high"], f"{where}.high")
+    low, high = numbers(data["low"], f"{where}.low"), numbers(data["high"], f"{where}.high")
     if len(low) != size or len(high) != size:
         raise ValueError(f"{where}: low and high need {size} values each for shape {shape}")
     dtype = np.dtype(data["dtype"])
@@ -255,13 +171,13 @@ def _decode_kwargs(data: Any, policy_class: Any, where: str) -> dict[str, Any]:
         ok = {
             "bool": isinstance(value, bool),
             "bool?": value is None or isinstance(value, bool),
-            "number": _finite(value) is not None,
+            "number": finite(value) is not None,
             "int": type(value) is int and 0 < value <= 16,
             "activation": value in ACTIVATIONS,
             "net_arch": _valid_net_arch(value),
         }[kind]
         if not ok:
-            raise ValueError(f"{where}.{key}: invalid value {_short(value)}")
+            raise ValueError(f"{where}.{key}: invalid value {short(value)}")
         kwargs[key] = getattr(torch.nn, value) if kind == "activation" else value
     return kwargs
 
@@ -311,7 +227,7 @@ def read_policy_json(directory: Path) -> dict[str, Any]:
         raise ValueError(
             f"{directory}: no such policy directory (one holds {POLICY_JSON}, {WEIGHTS}, {NORMALIZATION})"
         )
-    problems = {name: _file_problem(directory / name) for name in (POLICY_JSON, WEIGHTS, NORMALIZATION)}
+    problems = {name: file_problem(directory / name) for name in (POLICY_JSON, WEIGHTS, NORMALIZATION)}
     special = [
         f"{name} is {problem}" for name, problem in problems.items() if problem not in (None, "missing")
     ]
@@ -325,8 +241,8 @@ def read_policy_json(directory: Path) -> dict[str, Any]:
                     f"python -m agents.policy_zip {directory} --allow-pickle")  # fmt: skip
         raise ValueError(f"{directory}: not a trained policy (missing {', '.join(missing)}){hint}")
     path = directory / POLICY_JSON
-    meta = _load_json(path)
-    _check_keys(meta, _POLICY_KEYS, _POLICY_KEYS - {"residual"}, str(path))
+    meta = load_object(path)
+    check_keys(meta, _POLICY_KEYS, _POLICY_KEYS - {"residual"}, str(path))
     # type(...) is int: True == 1 would otherwise pass as version 1
     if meta["format"] != FORMAT or type(meta["version"]) is not int or meta["version"] != VERSION:
         raise ValueError(f"{path}: not an {FORMAT} v{VERSION} file")
@@ -336,7 +252,7 @@ def read_policy_json(directory: Path) -> dict[str, Any]:
         entry = meta["residual"]
         if not isinstance(entry, dict) or set(entry) != set(Residual._fields):
             raise ValueError(f"{path}: residual must be an object with {', '.join(Residual._fields)}")
-        if type(entry["scale"]) is int and _finite(entry["scale"]) is None:  # beyond float's range
+        if type(entry["scale"]) is int and finite(entry["scale"]) is None:  # beyond float's range
             raise ValueError(
                 f"{path}: residual: scale must be a number in (0, 2], got an integer beyond float's range"
             )
@@ -376,19 +292,6 @@ def load_policy(directory: Path) -> LoadedPolicy:
     return LoadedPolicy(policy, meta["algo"], meta["env"], normalization, directory, meta.get("residual"))
 
 
-def _file_problem(path: Path) -> str | None:
-    """None for a regular file (symlinks followed), "missing", or what ``path`` is instead (a
-    directory, a FIFO, a symbolic link loop, ...); nothing is opened (a FIFO would block)."""
-    try:
-        mode = os.stat(path).st_mode
-    except FileNotFoundError:
-        return "a broken symbolic link" if os.path.islink(path) else "missing"
-    except OSError as exc:  # other errors (permissions, ...) are named by the read that follows
-        return "a symbolic link loop" if exc.errno == errno.ELOOP else None
-    kind = special_kind(mode)
-    return None if kind is None else spelled_kind(kind)
-
-
 def _read_weights(path: Path) -> bytes:
     """The bytes of ``policy.safetensors``, a regular file of at most :data:`MAX_WEIGHTS_BYTES`."""
     return read_or_refuse(path, MAX_WEIGHTS_BYTES, "a safetensors file", "the weights of a policy")
@@ -417,87 +320,3 @@ def _load_state(policy: Any, tensors: dict[str, Any], path: Path) -> None:
             raise ValueError(f"{path}: {key} holds non-finite weights (NaN or inf)")
     policy.load_state_dict(tensors, strict=True)
     policy.set_training_mode(False)
-
-
-def save_normalization(venv: Any, path: Path) -> None:
-    """Write a VecNormalize's observation statistics as JSON (atomically)."""
-    rms = venv.obs_rms
-    data = {"mean": rms.mean.tolist(), "var": rms.var.tolist(), "count": float(rms.count),
-            "clip": float(venv.clip_obs), "epsilon": float(venv.epsilon)}  # fmt: skip
-    write_atomic(Path(path), json.dumps(data) + "\n")
-
-
-def read_normalization(path: Path) -> Normalization:
-    """The checked statistics of a ``normalization.json``; ValueError naming the problem."""
-    data = _load_json(Path(path))
-    _check_keys(data, _NORMALIZATION_KEYS, _NORMALIZATION_KEYS - {"count"}, str(path))
-    mean, var = _numbers(data["mean"], f"{path}: mean"), _numbers(data["var"], f"{path}: var")
-    if len(mean) != len(var) or not mean or not all(np.isfinite(mean + var)) or min(var) < 0:
-        raise ValueError(f"{path}: mean and var must be finite lists of one length (var >= 0)")
-    count = _finite(data.get("count", 1e-4))  # SB3's RunningMeanStd starts from 1e-4
-    if count is None or not count > 0:
-        raise ValueError(f"{path}: count must be a finite positive number, got {_short(data.get('count'))}")
-    scalars = {}
-    for key, (low, high) in (("clip", CLIP_RANGE), ("epsilon", EPSILON_RANGE)):
-        value = _finite(data[key])
-        if value is None or not low <= value <= high:
-            raise ValueError(f"{path}: {key} must be a finite positive number in [{low:g}, {high:g}], "
-                             f"got {_short(data[key])}")  # fmt: skip
-        scalars[key] = value
-    return Normalization(np.array(mean), np.array(var), count, scalars["clip"], scalars["epsilon"])
-
-
-def check_sb3_zip(path: Path) -> None:
-    """Before SB3 opens an SB3 ``.zip`` (with ``allow_pickle``): ValueError naming ``path`` unless it
-    is a regular file, or naming the ``normalization.json`` beside it if that one does not read
-    (so that no error of ours is raised from inside SB3's load: see :func:`sb3_zip_error`)."""
-    path = Path(path)
-    problem = _file_problem(path)
-    if problem == "missing":
-        raise ValueError(f"{path}: no such file")
-    if problem is not None:
-        raise ValueError(f"{path}: not an SB3 zip: it is {problem}, not a regular file")
-    beside = path.parent / NORMALIZATION
-    problem = _file_problem(beside)
-    if problem is None:
-        read_normalization(beside)
-    elif problem != "missing":  # not skipped: the policy would see unnormalized observations
-        raise ValueError(f"{beside}: not valid JSON: it is {problem}, not a regular file")
-
-
-def sb3_zip_error(path: Path, algo: str, exc: Exception) -> ValueError:
-    """The ValueError naming ``path`` for what SB3's ``load`` raised on a damaged zip: it raises
-    KeyError, AssertionError, AttributeError, JSON or UnicodeDecodeErrors, or a ValueError of its
-    own, none naming the file or the problem in the user's terms."""
-    import zipfile
-
-    if isinstance(exc.__cause__, zipfile.BadZipFile):
-        return ValueError(f"{path}: not an SB3 zip: not a zip file")
-    if isinstance(exc, json.JSONDecodeError):
-        detail = f"its data entry is not valid JSON ({exc})"
-    elif isinstance(exc, UnicodeDecodeError):
-        detail = "its data entry is not UTF-8 text"
-    elif isinstance(exc, RecursionError):
-        detail = "its data entry is nested too deeply"
-    else:
-        text = exc.args[0] if isinstance(exc, KeyError) and exc.args else str(exc)  # KeyError quotes it
-        detail = str(text) or type(exc).__name__
-    detail = " ".join(detail.split())  # one line for the CLI's error line
-    if len(detail) > 300:
-        detail = detail[:297] + "..."
-    return ValueError(f"{path}: cannot load it as an SB3 {algo} zip ({detail})")
-
-
-def to_vec_normalize(path: Path, venv: Any, training: bool = False, norm_reward: bool = False) -> Any:
-    """SB3's ``VecNormalize`` around ``venv`` holding the statistics of a ``normalization.json``
-    (by default frozen, rewards not normalized: as for evaluation)."""
-    from stable_baselines3.common.vec_env import VecNormalize
-
-    stats = read_normalization(Path(path))
-    shape = getattr(venv.observation_space, "shape", None)
-    if shape != stats.mean.shape:
-        raise ValueError(f"{path}: statistics of shape {stats.mean.shape} for observations of shape {shape}")
-    vec = VecNormalize(venv, training=training, norm_obs=True, norm_reward=norm_reward,
-                       clip_obs=stats.clip, epsilon=stats.epsilon)  # fmt: skip
-    vec.obs_rms.mean, vec.obs_rms.var, vec.obs_rms.count = stats.mean.copy(), stats.var.copy(), stats.count
-    return vec

@@ -11,20 +11,21 @@ for bit on random observations; the zip is left for you to delete.
 
 from __future__ import annotations
 
+import json
 import sys
 from pathlib import Path
 
 import numpy as np
 
+from agents.json_fields import file_problem
+from agents.normalization import NORMALIZATION, read_normalization
 from agents.policy_files import (
-    NORMALIZATION,
     PICKLE_WARNING,
     POLICY_JSON,
     WEIGHTS,
     LoadedPolicy,
     algorithm_class,
     load_policy,
-    read_normalization,
     save_policy,
 )
 
@@ -39,16 +40,62 @@ def load_sb3_zip(path: Path, algo: str, *, allow_pickle: bool = False) -> Loaded
             f"{path}: refusing to load an SB3 zip: {PICKLE_WARNING}; pass allow_pickle=True "
             "(ssme-envs evaluate --allow-pickle) to load it anyway"
         )
-    if not path.is_file():
-        raise ValueError(f"{path}: no such file")
+    algorithm = algorithm_class(algo)
+    check_sb3_zip(path)  # our own errors (the file, the normalization beside it) raised before SB3's
     print(f"warning: {path}: {PICKLE_WARNING}", file=sys.stderr)
-    model = algorithm_class(algo).load(path, device="cpu")
+    try:
+        model = algorithm.load(path, device="cpu")
+    except (OSError, MemoryError):
+        raise
+    except Exception as exc:  # SB3 on a damaged zip: KeyError, AssertionError, JSON errors, ...
+        raise sb3_zip_error(path, algo, exc) from None
     beside = path.parent / NORMALIZATION
     normalization = read_normalization(beside) if beside.is_file() else None
     if normalization is None:
         print(f"warning: no {NORMALIZATION} beside {path}: observations go to the policy unnormalized",
               file=sys.stderr)  # fmt: skip
     return LoadedPolicy(model.policy, algo, None, normalization, path)
+
+
+def check_sb3_zip(path: Path) -> None:
+    """Before SB3 opens an SB3 ``.zip`` (with ``allow_pickle``): ValueError naming ``path`` unless it
+    is a regular file, or naming the ``normalization.json`` beside it if that one does not read
+    (so that no error of ours is raised from inside SB3's load: see :func:`sb3_zip_error`)."""
+    path = Path(path)
+    problem = file_problem(path)
+    if problem == "missing":
+        raise ValueError(f"{path}: no such file")
+    if problem is not None:
+        raise ValueError(f"{path}: not an SB3 zip: it is {problem}, not a regular file")
+    beside = path.parent / NORMALIZATION
+    problem = file_problem(beside)
+    if problem is None:
+        read_normalization(beside)
+    elif problem != "missing":  # not skipped: the policy would see unnormalized observations
+        raise ValueError(f"{beside}: not valid JSON: it is {problem}, not a regular file")
+
+
+def sb3_zip_error(path: Path, algo: str, exc: Exception) -> ValueError:
+    """The ValueError naming ``path`` for what SB3's ``load`` raised on a damaged zip: it raises
+    KeyError, AssertionError, AttributeError, JSON or UnicodeDecodeErrors, or a ValueError of its
+    own, none naming the file or the problem in the user's terms."""
+    import zipfile
+
+    if isinstance(exc.__cause__, zipfile.BadZipFile):
+        return ValueError(f"{path}: not an SB3 zip: not a zip file")
+    if isinstance(exc, json.JSONDecodeError):
+        detail = f"its data entry is not valid JSON ({exc})"
+    elif isinstance(exc, UnicodeDecodeError):
+        detail = "its data entry is not UTF-8 text"
+    elif isinstance(exc, RecursionError):
+        detail = "its data entry is nested too deeply"
+    else:
+        text = exc.args[0] if isinstance(exc, KeyError) and exc.args else str(exc)  # KeyError quotes it
+        detail = str(text) or type(exc).__name__
+    detail = " ".join(detail.split())  # one line for the CLI's error line
+    if len(detail) > 300:
+        detail = detail[:297] + "..."
+    return ValueError(f"{path}: cannot load it as an SB3 {algo} zip ({detail})")
 
 
 def convert_run(directory: Path, env_id: str, algo: str, *, allow_pickle: bool = False,
@@ -82,8 +129,12 @@ def _main(argv: list[str]) -> int:
               file=sys.stderr)  # fmt: skip
         return 2
     for directory in dirs:
-        config = check_config(load_config(directory / "config.toml"), str(directory / "config.toml"))
-        count = convert_run(directory, config["env"], config["algo"], allow_pickle=True)
+        try:
+            config = check_config(load_config(directory / "config.toml"), str(directory / "config.toml"))
+            count = convert_run(directory, config["env"], config["algo"], allow_pickle=True)
+        except ValueError as exc:  # a damaged zip, config or normalization: one line, as the CLI's
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
         print(f"{directory}: wrote {POLICY_JSON} and {WEIGHTS}; actions bit-equal on {count} observations")
     return 0
 

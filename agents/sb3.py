@@ -23,18 +23,14 @@ from typing import Any
 import numpy as np
 
 from agents.base import BatchController
+from agents.normalization import NORMALIZATION, save_normalization, to_vec_normalize
 from agents.policy_files import (
     ALGOS,
-    NORMALIZATION,
     POLICY_JSON,
     WEIGHTS,
     LoadedPolicy,
-    check_sb3_zip,
     load_policy,
-    save_normalization,
     save_policy,
-    sb3_zip_error,
-    to_vec_normalize,
     write_atomic,
 )
 from agents.policy_files import algorithm_class as _algorithm
@@ -240,15 +236,7 @@ def load_trained(path: str | Path, algo: str | None = None, allow_pickle: bool =
     if path.suffix == ".zip":
         if algo is None:
             raise ValueError(f"{path}: name the algorithm of an SB3 zip ({', '.join(ALGOS)})")
-        if not allow_pickle:
-            return load_sb3_zip(path, algo, allow_pickle=False)  # refused, naming the risk
-        check_sb3_zip(path)  # our own errors (the file, the normalization beside it) raised before SB3's
-        try:
-            return load_sb3_zip(path, algo, allow_pickle=True)
-        except (OSError, MemoryError):
-            raise
-        except Exception as exc:  # SB3 on a damaged zip: KeyError, AssertionError, JSON errors, ...
-            raise sb3_zip_error(path, algo, exc) from None
+        return load_sb3_zip(path, algo, allow_pickle=allow_pickle)  # without it refused, naming the risk
     if path.is_file():
         raise ValueError(f"{path}: a trained policy is a directory ({POLICY_JSON}, {WEIGHTS}, "
                          f"{NORMALIZATION}) or, with allow_pickle, an SB3 .zip")  # fmt: skip

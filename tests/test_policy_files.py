@@ -27,14 +27,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from agents import parse_controller, policy_files
-from agents.policy_files import (
-    PICKLE_WARNING,
-    load_policy,
-    read_normalization,
-    save_policy,
-    to_vec_normalize,
-    write_atomic,
-)
+from agents.normalization import read_normalization, to_vec_normalize
+from agents.policy_files import PICKLE_WARNING, load_policy, save_policy, write_atomic
 from agents.policy_zip import _main as convert_main
 from agents.sb3 import SHIPPED, PolicyController, load_trained, shipped_policy
 from ssme_envs.cli import main
@@ -580,6 +574,19 @@ def test_a_damaged_sb3_zip_prints_no_warning_or_traceback_from_a_real_process(tm
     assert proc.returncode == 2
     lines = proc.stderr.splitlines()
     assert len(lines) == 2 and lines[1].startswith(f"error: {bad}: cannot load it as an SB3 ppo zip"), lines
+
+
+def test_the_converter_names_a_damaged_zip_in_one_line_and_writes_nothing(tmp_path, capsys):
+    run = tmp_path / "old"
+    run.mkdir()
+    _zip(run / "model.zip", {"data": "not json"})
+    (run / "config.toml").write_text(f'env = "{NOZZLE}"\nalgo = "ppo"\n')
+    assert convert_main([str(run), "--allow-pickle"]) == 2
+    lines = capsys.readouterr().err.splitlines()
+    assert len(lines) == 2 and PICKLE_WARNING in lines[0], lines
+    expected = f"error: {run / 'model.zip'}: cannot load it as an SB3 ppo zip (its data entry is not"
+    assert lines[1].startswith(expected), lines
+    assert sorted(p.name for p in run.iterdir()) == ["config.toml", "model.zip"]
 
 
 @pytest.mark.parametrize("kind", ["a directory", "a FIFO (named pipe)", "a symbolic link loop"])

@@ -153,7 +153,8 @@ def policy_cost(model: Any, venv: Any, env_id: str, algo: str, episodes: int) ->
     """The harness's mean episode cost of a model's deterministic policy, observations normalized
     with ``venv``'s current statistics, on the env as registered (episodes seeded from
     :data:`EVAL_SEED`)."""
-    from agents.policy_files import LoadedPolicy, Normalization
+    from agents.normalization import Normalization
+    from agents.policy_files import LoadedPolicy
     from agents.sb3 import PolicyController
     from ssme_envs.evaluation import evaluate
 
