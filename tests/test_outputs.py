@@ -221,3 +221,55 @@ def test_bench_refuses_a_special_file_before_it_measures(capsys, monkeypatch):
     assert capsys.readouterr().err.strip().splitlines()[-1] == (
         "error: /dev/null exists and is not a regular file: refusing to replace it"
     )
+
+
+# --- the library's run functions keep their inputs out of the earlier run they replace ---------
+
+
+def _record_and_model(where):
+    from ssme_envs.identification.pipeline import default_experiment, write_record
+    from ssme_envs.models import identified_model
+
+    write_record(where / "r.csv", default_experiment(100)["identification"])
+    identified_model(100).save(where / "m.json")
+
+
+def _library_run(call, out):
+    """(the call of a library run function reading an input inside ``out``, the input's name)."""
+    from ssme_envs import pipelines
+
+    record, model, run = out / "r.csv", out / "m.json", out / "run"
+    if call == "identify_engine":
+        return lambda: pipelines.identify_engine(out, record, indices=(2, 2)), "data"
+    if call == "identify_nozzle":
+        return lambda: pipelines.identify_nozzle(out, record, input_column="pc", output_column="mr"), "data"
+    if call == "validate_engine":
+        return lambda: pipelines.validate_engine(out, model, [record]), "model"
+    if call == "evaluate_plant":
+        env = "ssme_envs/EngineTracking-v0"
+        return lambda: pipelines.evaluate_to(out, env, ["zero"], ["pc_step"], 1, plant=str(model)), "plant"
+    spec = f"ppo:{run}"
+    return lambda: pipelines.evaluate_to(
+        out, "ssme_envs/NozzleTVC-v0", [spec], ["step"], 1
+    ), f"controllers {spec}"
+
+
+@pytest.mark.parametrize(
+    "call", ["identify_engine", "identify_nozzle", "validate_engine", "evaluate_plant", "evaluate_policy"]
+)
+def test_a_library_run_refuses_inputs_inside_the_earlier_run_it_would_replace(tmp_path, call):
+    import re
+    import shutil
+
+    from agents.sb3 import shipped_policy
+
+    out = tmp_path / "out"
+    _previous_run(out)
+    _record_and_model(out)
+    shutil.copytree(shipped_policy("ssme_envs/NozzleTVC-v0"), out / "run")
+    before = _tree(out)
+    run, name = _library_run(call, out)
+    message = rf"^{re.escape(name)} {re.escape(str(out))}/\S+ lies in out_dir {re.escape(str(out))}, which"
+    with pytest.raises(OutputError, match=message):
+        run()
+    assert _tree(out) == before

@@ -273,12 +273,9 @@ def _inputs(args: argparse.Namespace) -> dict[str, str | Path]:
             if path is not None:
                 found[f"--{key}" if i == 0 else f"--{key} (#{i + 1})"] = path
     if args.command == "evaluate":
-        if args.plant is not None and Path(args.plant).exists():
-            found["--plant"] = args.plant
-        for spec in (args.controllers or "").split(","):
-            run = spec.partition(":")[2]
-            if run and Path(run).exists():
-                found[f"--controllers {spec}"] = run
+        from ssme_envs.pipelines import evaluation_inputs
+
+        found.update(evaluation_inputs(args.plant, (args.controllers or "").split(","), "--"))
     return found
 
 

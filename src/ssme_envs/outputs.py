@@ -26,7 +26,7 @@ import shutil
 import sys
 import tempfile
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
 from pathlib import Path
 from typing import IO, Any
@@ -281,18 +281,23 @@ def holds_run(out: str | Path) -> bool:
     return (Path(out) / MARKER).is_file()
 
 
-def check_inputs_outside(out: str | Path, inputs: dict[str, str | Path]) -> None:
+def check_inputs_outside(
+    out: str | Path, inputs: Mapping[str, str | Path | None], out_name: str = "--out"
+) -> None:
     """OutputError when an input file or directory lies in ``out``, which the run replaces (with
-    every file in it) once it succeeds; ``inputs`` maps each input's name (the option) to its path."""
+    every file in it) once it succeeds; ``inputs`` maps each input's name (the option or
+    parameter) to its path (None: not given), ``out_name`` names ``out`` in the message."""
     if not holds_run(out):  # only an earlier run is replaced; other contents are refused as they are
         return
     target = os.path.realpath(out)
     for option, path in inputs.items():
+        if path is None:
+            continue
         where = os.path.realpath(path)
         if where == target or where.startswith(target.rstrip(os.sep) + os.sep):
             raise OutputError(
-                f"{option} {path} lies in --out {out}, which this run replaces with its own files: "
-                "choose another --out or move the input out of it"
+                f"{option} {path} lies in {out_name} {out}, which this run replaces with its own files: "
+                f"choose another {out_name} or move the input out of it"
             )
 
 
@@ -348,9 +353,14 @@ def run_directory(out: str | Path, stage: bool = True) -> Iterator[Path]:
 
 
 @contextmanager
-def output_directory(out: str | Path) -> Iterator[Path]:
+def output_directory(
+    out: str | Path, inputs: Mapping[str, str | Path | None] | None = None
+) -> Iterator[Path]:
     """:func:`run_directory` for a library function: file-system errors inside the block become
-    ValueErrors naming ``out``, not the temporary directory the user never sees."""
+    ValueErrors naming ``out``, not the temporary directory the user never sees. ``inputs``: the
+    files and directories the function reads, by parameter name, refused where they lie in an
+    earlier run at ``out`` (:func:`check_inputs_outside`), which this run would delete."""
+    check_inputs_outside(out, inputs or {}, "out_dir")
     with run_directory(out) as work:
         try:
             yield work

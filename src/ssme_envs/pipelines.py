@@ -49,6 +49,22 @@ def _factories(env_id: str, controllers: Sequence[str] | Mapping[str, Callable] 
     return {name: parse_controller(name, env_id, allow_pickle) for name in names}
 
 
+def evaluation_inputs(
+    plant: str | Path | None, controllers: Sequence[str] | Mapping[str, Callable] | None, prefix: str = ""
+) -> dict[str, str | Path]:
+    """The files and directories an evaluation reads, by name (``prefix`` + plant, + controllers
+    SPEC): a plant given as a model.json and the run directories of controller specs."""
+    found: dict[str, str | Path] = {}
+    if plant is not None and Path(plant).exists():
+        found[f"{prefix}plant"] = plant
+    specs = [] if controllers is None or isinstance(controllers, Mapping | str) else controllers
+    for spec in specs:
+        run = str(spec).partition(":")[2]
+        if run and Path(run).exists():
+            found[f"{prefix}controllers {spec}"] = run
+    return found
+
+
 def _evaluate_into(
     work: Path,
     env_id: str,
@@ -154,7 +170,7 @@ def evaluate_to(
         ) + ("" if plant is None else f" --plant {plant}")
         command = (f"ssme-envs evaluate --env {env_id} --controllers {','.join(factories)} --scenario "
                    f"{','.join(names)} {runs} --seed {seed} --out {out_dir}")  # fmt: skip
-    with output_directory(out_dir) as work:
+    with output_directory(out_dir, evaluation_inputs(plant, controllers)) as work:
         return _evaluate_into(
             work, env_id, factories, scenarios, episodes, seed, command, progress, spread, plant
         )
@@ -246,6 +262,7 @@ __all__ = [
     "EngineRun",
     "NozzleRun",
     "evaluate_to",
+    "evaluation_inputs",
     "identify_engine",
     "identify_nozzle",
     "load_engine_model",

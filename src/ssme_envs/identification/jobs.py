@@ -149,7 +149,7 @@ def identify_engine(
         records["validation"] = _read(pipeline.read_record, validate, tuple(inputs), tuple(outputs), dt)
         _check_same_dt(validate, records["validation"].dt, records["identification"].dt, "data")
         _check_record(validate, records["validation"])
-    with output_directory(out_dir) as work:
+    with output_directory(out_dir, {"data": data, "validate": validate}) as work:
         ident = pipeline.identify_record(records["identification"], **options)
         validation = {"identification": ident.model.fit["identification_record"]}
         if validate is not None:
@@ -259,7 +259,7 @@ def identify_nozzle(
             _check_same_dt(validate, check.dt, records["identification"].dt, "data")
             records["validation"] = check
         note = f"Data: {data}."
-    with output_directory(out_dir) as work:
+    with output_directory(out_dir, {"data": data, "validate": validate}) as work:
         ident = nozzle_into(work, records, seed, workers, normalization_a, note, progress)
     return NozzleRun(ident, out_dir / "report.md", time.perf_counter() - start)
 
@@ -296,7 +296,8 @@ def validate_engine(out_dir: str | Path, model: Path, data: Sequence[Path], dt: 
     validation = {
         label: _scores(engine, records[label], path) for path, label in zip(data, labels, strict=True)
     }
-    with output_directory(out_dir) as work:
+    inputs = {"model": model, **{f"data[{i}]": path for i, path in enumerate(data)}}
+    with output_directory(out_dir, inputs) as work:
         report.write_record_report(work, engine, records, validation)
     return validation
 
