@@ -35,7 +35,7 @@ class ZeroAction(BatchController):
 
     name = "zero"
 
-    def __init__(self, env: Any, design: str = "identified") -> None:
+    def __init__(self, env: Any, design: str | None = None) -> None:
         super().__init__()
         self.size = task_of(env).n_actions
 
@@ -74,8 +74,10 @@ def _shipped_ppo(env: Any, design: str) -> Controller:
 
 
 # name -> (factory(env, design), the env ids it serves, the design model when none is named)
-CONTROLLERS: dict[str, tuple[Callable[[Any, str], Controller], tuple[str, ...], str]] = {
-    "zero": (ZeroAction, tuple(ENVS), "identified"),  # the baseline of every env
+# name -> (factory of env and design model, the envs it serves, its default design model: None for
+# a controller designed on no model, which takes none)
+CONTROLLERS: dict[str, tuple[Callable[[Any, Any], Controller], tuple[str, ...], str | None]] = {
+    "zero": (ZeroAction, tuple(ENVS), None),  # the baseline of every env
     "pi": (DecoupledPI, (TRACKING, THROTTLE), "identified"),
     "lqi": (LQIServo, (TRACKING, NOZZLE, LAUNCHER), "identified"),
     "mpc": (MPC, (TRACKING,), "identified"),
@@ -91,8 +93,13 @@ CONTROLLERS: dict[str, tuple[Callable[[Any, str], Controller], tuple[str, ...], 
 
 
 def controller_names(env_id: str) -> list[str]:
-    """The controllers that serve an env (each also usable as ``name:truth``)."""
+    """The controllers that serve an env (each designed on a model also usable as ``name:truth``)."""
     return [name for name, (_, envs, _) in CONTROLLERS.items() if env_id in envs]
+
+
+def takes_design(name: str) -> bool:
+    """Whether the controller ``name`` (a key of :data:`CONTROLLERS`) is designed on a model."""
+    return CONTROLLERS[name][2] is not None
 
 
 def parse_controller(spec: str, env_id: str, allow_pickle: bool = False) -> Callable[[Any], Controller]:
@@ -131,12 +138,15 @@ def parse_controller(spec: str, env_id: str, allow_pickle: bool = False) -> Call
         raise ValueError(
             f"unknown controller {spec!r} for {env_id}; choose from {', '.join(valid)} or {trained}"
         )
-    design = design or CONTROLLERS[name][2]
-    if design not in DESIGN_SOURCES and not (name == "ppo" and design in POLICY_VARIANTS):
+    factory, default = CONTROLLERS[name][0], CONTROLLERS[name][2]
+    if design and not takes_design(name):
+        raise ValueError(f"{spec!r}: the {name} controller is designed on no model; write {name!r}")
+    design = design or default
+    variant = name == "ppo" and design in POLICY_VARIANTS
+    if takes_design(name) and design not in DESIGN_SOURCES and not variant:
         raise ValueError(
             f"unknown design model {design!r} in {spec!r}; choose from {', '.join(DESIGN_SOURCES)}"
         )
-    factory = CONTROLLERS[name][0]
     return lambda env: factory(env, design)
 
 
@@ -172,4 +182,5 @@ __all__ = [
     "controller_names",
     "make_controller",
     "parse_controller",
+    "takes_design",
 ]

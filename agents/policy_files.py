@@ -252,10 +252,6 @@ def read_policy_json(directory: Path) -> dict[str, Any]:
         entry = meta["residual"]
         if not isinstance(entry, dict) or set(entry) != set(Residual._fields):
             raise ValueError(f"{path}: residual must be an object with {', '.join(Residual._fields)}")
-        if type(entry["scale"]) is int and finite(entry["scale"]) is None:  # beyond float's range
-            raise ValueError(
-                f"{path}: residual: scale must be a number in (0, 2], got an integer beyond float's range"
-            )
         meta["residual"] = check_residual(entry["base"], entry["scale"], meta["env"], f"{path}: residual")
     return meta
 

@@ -26,6 +26,7 @@ import gymnasium as gym
 import numpy as np
 
 from agents.base import BatchController, Controller
+from agents.json_fields import short
 
 
 class Residual(NamedTuple):
@@ -38,7 +39,7 @@ class Residual(NamedTuple):
 def check_residual(base: Any, scale: Any, env_id: str, where: str = "residual") -> Residual:
     """The residual, or ValueError naming what is wrong: ``base`` a classical controller of the env
     (not a learned policy: a residual over a residual would hide what acts), ``scale`` in (0, 2]."""
-    from agents import CONTROLLERS, controller_names
+    from agents import CONTROLLERS, controller_names, takes_design
     from agents.plants import DESIGN_SOURCES
     from ssme_envs.envs.catalogue import ENVS
 
@@ -51,12 +52,17 @@ def check_residual(base: Any, scale: Any, env_id: str, where: str = "residual") 
     if name not in classical or name not in CONTROLLERS:
         raise ValueError(f"{where}: base {base!r} is not a classical controller of {env_id}; "
                          f"choose from {', '.join(classical)}")  # fmt: skip
+    if design and not takes_design(name):
+        raise ValueError(
+            f"{where}: base {base!r}: the {name} controller is designed on no model; write {name!r}"
+        )
     if design and design not in DESIGN_SOURCES:
         raise ValueError(f"{where}: base {base!r} names no design model; after the colon write "
                          f"{' or '.join(DESIGN_SOURCES)}")  # fmt: skip
-    ok = isinstance(scale, int | float) and not isinstance(scale, bool) and math.isfinite(scale)
-    if not ok or not 0 < scale <= 2:
-        raise ValueError(f"{where}: scale must be a number in (0, 2], got {scale!r}")
+    # an integer beyond float's range is no number in (0, 2] either (math.isfinite would overflow)
+    ok = isinstance(scale, int | float) and not isinstance(scale, bool) and -2 <= scale <= 2
+    if not ok or not math.isfinite(scale) or not 0 < scale <= 2:
+        raise ValueError(f"{where}: scale must be a number in (0, 2], got {short(scale)}")
     return Residual(base, float(scale))
 
 

@@ -54,7 +54,10 @@ def check_config(config: dict[str, Any], source: str = "config") -> dict[str, An
             raise ValueError(f"{source}: unknown key {key!r}; known: {', '.join(CONFIG_KEYS)}")
         want = CONFIG_KEYS[key]
         if want is float and isinstance(value, int) and not isinstance(value, bool):
-            value = float(value)  # TOML writes 1 for 1.0
+            try:
+                value = float(value)  # TOML writes 1 for 1.0
+            except OverflowError:  # TOML's reader takes integers of any length
+                raise ValueError(f"{source}: {key} must be a float, got an integer too large") from None
         if not isinstance(value, want) or (want is int and isinstance(value, bool)):
             raise ValueError(f"{source}: {key} must be {want.__name__}, got {type(value).__name__}")
         typed[key] = value

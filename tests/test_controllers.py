@@ -195,6 +195,9 @@ def test_unknown_names_list_the_valid_ones():
     for spec in ("zero:", "ppo:", "lqi:"):
         with pytest.raises(ValueError, match="names nothing after ':'"):
             parse_controller(spec, TRACKING)
+    for design in ("truth", "identified", "paper"):  # the baseline is designed on no model
+        with pytest.raises(ValueError, match=f"'zero:{design}': the zero controller is designed on no model"):
+            parse_controller(f"zero:{design}", TRACKING)
     assert "hysteresis" in controller_names(NOZZLE) and "hysteresis" not in controller_names(TRACKING)
 
 

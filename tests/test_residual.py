@@ -177,6 +177,8 @@ def test_a_trained_residual_records_its_base_and_loads_with_it(tmp_path):
             "log_std_init sets PPO's initial noise, not td3's",
         ),
         ({"residual": "lqi:bogus"}, "names no design model; after the colon write identified or truth"),
+        ({"residual": "zero:truth"}, "base 'zero:truth': the zero controller is designed on no model"),
+        ({"residual": "lqi", "residual_scale": 10**400}, "residual_scale must be a float, got an integer"),
         ({"env": "ssme_envs/Nope-v0", "residual": "lqi"}, "unknown env 'ssme_envs/Nope-v0'"),
     ],
 )

@@ -142,9 +142,12 @@ def run_benchmark(
     floor_steps_per_s (vector rows; NaN for single), of_floor}; ``actions``: "zero" and/or
     "random"."""
     import ssme_envs  # noqa: F401  (registers the environments)
+    from ssme_envs.evaluation import check_distinct
 
     if rounds < 1:
         raise ValueError(f"rounds must be >= 1, got {rounds}")
+    for listed, what in ((env_ids, "env"), (sizes, "size"), (actions, "action kind")):
+        check_distinct(listed, what)  # a repeat would be measured again and shown twice
     say = progress or (lambda _: None)
     rows: list[dict[str, float | str]] = []
     for env_id in env_ids:

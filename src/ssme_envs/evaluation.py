@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import functools
 import time
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Hashable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -147,7 +147,17 @@ def check_scenarios(env_id: str, names: Sequence[str]) -> list[str]:
     if unknown:
         choices = ", ".join(valid)
         raise ValueError(f"unknown scenario {', '.join(unknown)} for {env_id}; choose from {choices}")
+    check_distinct(names, "scenario")
     return list(names)
+
+
+def check_distinct(names: Sequence[Hashable], what: str) -> None:
+    """ValueError naming the first of ``names`` listed twice (its runs would be stored once)."""
+    seen: set[Hashable] = set()
+    for name in names:
+        if name in seen:
+            raise ValueError(f"{what} {name} is listed twice; list each once")
+        seen.add(name)
 
 
 def make_env(
@@ -370,6 +380,7 @@ __all__ = [
     "Layout",
     "OutputMetrics",
     "Rollout",
+    "check_distinct",
     "check_env_id",
     "check_scenarios",
     "evaluate",

@@ -38,7 +38,7 @@ def _factories(env_id: str, controllers: Sequence[str] | Mapping[str, Callable] 
                allow_pickle: bool) -> dict[str, Callable]:  # fmt: skip
     """Controller factories by name: given, or parsed from specs (default: every one for the env)."""
     from agents import controller_names, parse_controller
-    from ssme_envs.evaluation import check_factories
+    from ssme_envs.evaluation import check_distinct, check_factories
 
     if isinstance(controllers, Mapping):
         check_factories(controllers)
@@ -46,7 +46,9 @@ def _factories(env_id: str, controllers: Sequence[str] | Mapping[str, Callable] 
     if isinstance(controllers, str):  # a list of specs, not one spec split into its letters
         raise TypeError(f"controllers must be a list of controller specs, got the string {controllers!r}")
     names = controller_names(env_id) if controllers is None else list(controllers)
-    return {name: parse_controller(name, env_id, allow_pickle) for name in names}
+    factories = {name: parse_controller(name, env_id, allow_pickle) for name in names}  # checks each
+    check_distinct(names, "controller")
+    return factories
 
 
 def evaluation_inputs(
