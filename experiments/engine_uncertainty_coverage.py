@@ -32,7 +32,10 @@ def main() -> None:
         default=",".join(str(p) for p in POWER_LEVELS),
     )
     parser.add_argument(
-        "--noise", type=float_within(0.0, 1.0), default=0.05, help="std, fraction of each output's spread"
+        "--noise",
+        type=float_within(0.0, 1.0, above=True),  # without noise the intervals have nothing to cover
+        default=0.05,
+        help="std, fraction of each output's spread",
     )
     parser.add_argument(
         "--methods", type=comma_choices(("iv", "ls")), default="iv", help="comma-separated: iv, ls"

@@ -49,6 +49,7 @@ CASES: dict[str, list[tuple[tuple[str, ...], str]]] = {
         (("--levels", "100,"), "--levels"),
         (("--methods", "mle"), "--methods"),
         (("--noise", "nan"), "--noise"),
+        (("--noise", "0"), "--noise must be a number above 0"),  # noise-free intervals cover nothing
     ],
     "import_time": [(("--rounds", "0"), "--rounds"), (("--rounds", "x"), "--rounds"), (BOGUS, "--bogus")],
     "learned_vs_classical": [
@@ -282,6 +283,12 @@ def test_float_within_accepts_finite_numbers_in_range(value: float | str) -> Non
         else:
             with pytest.raises(argparse.ArgumentTypeError, match="must be a number"):
                 convert(text)
+    above = float_within(0.0, 1.0, above=True)  # the same, 0 itself refused
+    if number == number and 0.0 < number <= 1.0:
+        assert above(text) == number
+    else:
+        with pytest.raises(argparse.ArgumentTypeError, match="must be a number above 0 and at most 1"):
+            above(text)
 
 
 @given(items=st.lists(st.sampled_from(["iv", "ls", " ls ", "", "x", "IV"]), min_size=1, max_size=4))

@@ -86,7 +86,7 @@ def int_within(low: int, high: int | None = None) -> Callable[[str], int]:
     return convert
 
 
-def float_within(low: float, high: float | None = None) -> Callable[[str], float]:
+def float_within(low: float, high: float | None = None, *, above: bool = False) -> Callable[[str], float]:
     """An argparse ``type=`` for a real option.
 
     Parameters
@@ -94,20 +94,26 @@ def float_within(low: float, high: float | None = None) -> Callable[[str], float
     low, high : float
         Smallest and largest value taken (inclusive); no upper bound when ``high`` is None. NaN
         and infinities are refused.
+    above : bool
+        ``low`` itself is refused (a value must exceed it).
 
     Returns
     -------
     callable
         Text -> float; it raises ``argparse.ArgumentTypeError`` for other text.
     """
+    bounds = _bounds(low, high)
+    if above:
+        bounds = f"above {_number(low)}" + ("" if high is None else f" and at most {_number(high)}")
 
     def convert(text: str) -> float:
         try:
             value = number(text)
         except ValueError:
             value = math.nan
-        if not (math.isfinite(value) and low <= value and (high is None or value <= high)):
-            raise argparse.ArgumentTypeError(f"must be a number {_bounds(low, high)}, got {text!r}")
+        in_low = low < value if above else low <= value
+        if not (math.isfinite(value) and in_low and (high is None or value <= high)):
+            raise argparse.ArgumentTypeError(f"must be a number {bounds}, got {text!r}")
         return value
 
     return convert
