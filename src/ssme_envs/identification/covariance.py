@@ -29,10 +29,14 @@ if TYPE_CHECKING:
     from ssme_envs.models.statespace import AlphaCanonicalModel
 
 
-def theta_covariance(
+def theta_covariance_factor(
     phis: list[np.ndarray], instruments: list[np.ndarray], residuals: list[np.ndarray], lags: int
 ) -> np.ndarray:
-    """Sandwich covariance of the stacked per-output estimates (see the module docstring)."""
+    """A factor ``F`` of the stacked per-output estimates' sandwich covariance, ``cov = F F^T``
+    (see the module docstring). A factor, not the product: mapped through the delta method's
+    Jacobian ``J`` as ``(J F)(J F)^T`` the covariance stays positive semi-definite on any record,
+    where ``J cov J^T`` loses it to round-off when the regression is nearly exact (the bread's
+    large entries cancel in ``J``)."""
     g = np.hstack([z * v[:, None] for z, v in zip(instruments, residuals, strict=True)])
     meat = g.T @ g
     for lag in range(1, lags + 1):
@@ -40,27 +44,26 @@ def theta_covariance(
         meat += cross + cross.T
     # The window's sum is not positive semi-definite on every record; its negative part is noise.
     values, vectors = np.linalg.eigh(0.5 * (meat + meat.T))
-    meat = (vectors * np.clip(values, 0.0, None)) @ vectors.T
+    root = vectors * np.sqrt(np.clip(values, 0.0, None))
     bread = scipy.linalg.block_diag(
         *[np.linalg.inv(z.T @ phi) for z, phi in zip(instruments, phis, strict=True)]
     )
     n, k = g.shape[0], g.shape[1]
-    cov = bread @ meat @ bread.T * (n / max(n - k / len(phis), 1))
-    return 0.5 * (cov + cov.T)
+    return bread @ root * np.sqrt(n / max(n - k / len(phis), 1))
 
 
 def parameter_uncertainty(fit: _Fit, y: np.ndarray, method: str) -> ParameterUncertainty:
     """Covariance of the fitted model's free parameters (K, H, B, lambda) from its regression."""
     residuals = fit.residuals(y)
     lags = max(fit.model.observability_indices)
-    cov_theta = theta_covariance(fit.phis, fit.instruments, residuals, lags)
+    factor = theta_covariance_factor(fit.phis, fit.instruments, residuals, lags)
     sizes = np.cumsum([th.size for th in fit.thetas])[:-1]
 
     def parameters(flat: np.ndarray) -> np.ndarray:
         return fit.build(np.split(flat, sizes))[0].parameter_vector()
 
-    jac = jacobian(parameters, np.concatenate(fit.thetas))
-    cov = jac @ cov_theta @ jac.T
+    mapped = jacobian(parameters, np.concatenate(fit.thetas)) @ factor
+    cov = mapped @ mapped.T
     return ParameterUncertainty(
         tuple(fit.model.parameter_names()),
         0.5 * (cov + cov.T),
