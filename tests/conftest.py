@@ -94,3 +94,24 @@ def random_rollout(env_id: str, seed: int, batched: bool, steps: int, num_envs: 
             out.append(env.reset()[0])
     env.close()
     return out
+
+
+def random_system(order: int, n_inputs: int, n_outputs: int, rng: np.random.Generator):
+    """A stable (A, B, C) from random real and complex pole blocks behind a random change of basis
+    (no canonical form assumed)."""
+    import scipy.linalg
+
+    blocks, k = [], 0
+    while k < order:
+        radius = rng.uniform(0.3, 0.9)
+        if order - k >= 2 and rng.random() < 0.5:
+            angle = rng.uniform(0.1, 2.5)
+            rotation = [[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]]
+            blocks.append(radius * np.array(rotation))
+            k += 2
+        else:
+            blocks.append(np.array([[radius * rng.choice([-1.0, 1.0])]]))
+            k += 1
+    basis = rng.standard_normal((order, order))
+    a = basis @ scipy.linalg.block_diag(*blocks) @ np.linalg.inv(basis)
+    return a, rng.standard_normal((order, n_inputs)), rng.standard_normal((n_outputs, order))

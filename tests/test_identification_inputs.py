@@ -10,7 +10,7 @@ import re
 
 import numpy as np
 import pytest
-from conftest import dlsim, eq36
+from conftest import dlsim, eq36, markov, random_system
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
@@ -346,3 +346,25 @@ def test_integer_lists_and_unmasked_records_give_the_float_arrays_model():
         for field in ("A", "B", "C", "lam"):
             np.testing.assert_array_equal(getattr(model, field), getattr(reference, field))
         assert model.observability_indices == (2, 2)
+
+
+@settings(max_examples=15, deadline=None)
+@given(
+    input_scale=st.sampled_from([1e-30, 1e-10, 1e-4, 1.0, 1e4, 1e12]),
+    output_scale=st.sampled_from([1e-30, 1e-10, 1.0, 1e8, 1e12]),
+    seed=st.integers(0, 2**32 - 1),
+)
+def test_a_record_in_other_units_gives_the_same_model_in_those_units(input_scale, output_scale, seed):
+    """The inputs' rank test compared the lagged inputs with the ones column, and the regression's
+    rank lstsq's cut on its largest column: a good record in small or large units was refused as
+    "not persistently exciting" or "rank-deficient". The scaled record's Markov parameters, in the
+    first record's units, are the first's."""
+    rng = np.random.default_rng(seed)
+    a, b, c = random_system(2, 2, 2, rng)
+    u = rng.standard_normal((500, 2))
+    y = dlsim(a, b, c, u) + 0.01 * rng.standard_normal((500, 2))
+    base = identify(u, y, 0.1, asymmetric=False, indices=[1, 1]).model
+    scaled = identify(u * input_scale, y * output_scale, 0.1, asymmetric=False, indices=[1, 1]).model
+    first = markov(base.A, base.B, base.C, 6)
+    again = markov(scaled.A, scaled.B, scaled.C, 6) * input_scale / output_scale
+    assert np.max(np.abs(again - first)) <= 1e-9 * np.max(np.abs(first))

@@ -6,7 +6,7 @@ import json
 
 import numpy as np
 import pytest
-from conftest import dlsim, eq36, markov
+from conftest import dlsim, eq36, markov, random_system
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
@@ -110,27 +110,6 @@ def test_a_malformed_uncertainty_block_is_named(tmp_path, mutate, message):
         AlphaCanonicalModel.load(path)
 
 
-def _random_system(order: int, n_inputs: int, n_outputs: int, rng: np.random.Generator):
-    """A stable (A, B, C) from random real and complex pole blocks behind a random change of basis
-    (no canonical form assumed)."""
-    import scipy.linalg
-
-    blocks, k = [], 0
-    while k < order:
-        radius = rng.uniform(0.3, 0.9)
-        if order - k >= 2 and rng.random() < 0.5:
-            angle = rng.uniform(0.1, 2.5)
-            rotation = [[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]]
-            blocks.append(radius * np.array(rotation))
-            k += 2
-        else:
-            blocks.append(np.array([[radius * rng.choice([-1.0, 1.0])]]))
-            k += 1
-    basis = rng.standard_normal((order, order))
-    a = basis @ scipy.linalg.block_diag(*blocks) @ np.linalg.inv(basis)
-    return a, rng.standard_normal((order, n_inputs)), rng.standard_normal((n_outputs, order))
-
-
 @settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(
     shape=st.sampled_from([(2, 1, 1), (4, 1, 1), (6, 1, 1), (8, 1, 1), (4, 2, 2), (6, 2, 2)]),
@@ -145,7 +124,7 @@ def test_a_nearly_exact_record_gives_the_model_and_a_covariance_that_is_positive
     propagated as a factor now. The Markov parameters are checked against the true system's."""
     order, m, p = shape
     rng = np.random.default_rng(seed)
-    a, b, c = _random_system(order, m, p, rng)
+    a, b, c = random_system(order, m, p, rng)
     u = rng.standard_normal((1000, m))
     y = dlsim(a, b, c, u)
     y = y + noise * y.std(axis=0) * rng.standard_normal(y.shape)

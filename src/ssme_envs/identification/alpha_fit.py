@@ -19,6 +19,9 @@ from ssme_envs.models.statespace import AlphaCanonicalModel, AlphaStructure
 IV_PASSES = 2
 # Simulated outputs beyond this cannot serve as instruments (their squares overflow).
 OVERFLOW_GUARD = 1e100
+# Regressor columns whose lengths span more than this (a record in units far from the intercept's
+# ones) are solved as unit columns: lstsq would lose the small ones' digits to the large ones'.
+COLUMN_SPREAD = 1e6
 
 
 # lambda of an input whose |u| varies by less than this share of its mean (RMS) comes from the
@@ -146,7 +149,7 @@ def _fit(
         )
     thetas = []
     for i, phi in enumerate(phis):
-        theta, _, rank, _ = np.linalg.lstsq(phi, y[start:, i], rcond=None)
+        theta, rank = _least_squares(phi, y[start:, i])
         if rank < phi.shape[1]:
             raise ValueError(
                 f"the regression for output '{out_names[i]}' is rank-deficient ({rank} of "
@@ -189,7 +192,7 @@ def _fit(
             thetas = []
             for i, (z, phi) in enumerate(zip(instruments, phis, strict=True)):
                 q = np.linalg.qr(z)[0]
-                thetas.append(np.linalg.lstsq(q.T @ phi, q.T @ y[start:, i], rcond=None)[0])
+                thetas.append(_least_squares(q.T @ phi, q.T @ y[start:, i])[0])
             candidate, intercept = build(thetas)
             error, candidate_simulated = _simulation_error(candidate, u, y)
             if not error <= best:
@@ -197,6 +200,23 @@ def _fit(
             best = error
             fit = _Fit(candidate, thetas, phis, instruments, intercept, candidate_simulated, start, build)
     return fit
+
+
+def _least_squares(phi: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, int]:
+    """(theta, rank) of ``phi theta = y`` by least squares, with unit columns where lstsq on
+    ``phi`` as it is finds it rank-deficient or its columns' lengths span more than
+    :data:`COLUMN_SPREAD`: lstsq's cut is relative to the largest singular value, and a record in
+    small or large units beside the intercept's column of ones is only scaled, not deficient.
+    (Other systems keep lstsq's own solution, bit for bit.)"""
+    lengths = np.linalg.norm(phi, axis=0)
+    used = lengths[lengths > 0.0]
+    if used.size == lengths.size and used.max() <= COLUMN_SPREAD * used.min():
+        theta, _, rank, _ = np.linalg.lstsq(phi, y, rcond=None)
+        if rank == phi.shape[1]:
+            return theta, int(rank)
+    lengths[lengths == 0.0] = 1.0
+    theta, _, rank, _ = np.linalg.lstsq(phi / lengths, y, rcond=None)
+    return theta / lengths, int(rank)
 
 
 def _realize(

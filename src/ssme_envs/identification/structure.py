@@ -188,7 +188,11 @@ def instrumented_rows(feats: np.ndarray, y: np.ndarray, window: int) -> np.ndarr
     n_r, n_z = r_block.shape[1], z_block.shape[1]
     tri = scipy.linalg.qr(np.hstack([r_block, z_block, q_block]), mode="r", check_finite=False)[0]
     diag = np.abs(np.diag(tri)[: n_r + n_z])
-    if diag.min() < 1e-9 * diag.max():
+    # each column against its own length (what is left of it beside the columns before): the
+    # test of inputs in any units, which the largest diagonal entry (the ones column's, or the
+    # inputs', whichever units are larger) is not
+    lengths = np.linalg.norm(np.hstack([r_block, z_block]), axis=0)
+    if np.any(diag <= 1e-9 * lengths):
         raise ValueError(
             f"the inputs are not persistently exciting over {start} lags (the lagged-input "
             "matrix is rank-deficient): use a richer input such as a PRBS"
