@@ -138,3 +138,25 @@ def test_a_nearly_exact_record_gives_the_model_and_a_covariance_that_is_positive
     want = markov(a, b, c, 8)
     got = markov(model.A, model.B, model.C, 8)
     assert np.max(np.abs(got - want)) <= 1e-5 * np.max(np.abs(want))
+
+
+def test_an_iv_fit_that_keeps_least_squares_says_so():
+    """Under ``method="iv"`` an instrumental-variable pass is kept only where it simulates the
+    record better; otherwise the estimate is least squares' (biased under white output noise), and
+    the covariance's method said "instrumental variables" all the same. Now its words name the
+    estimate kept."""
+    rng = np.random.default_rng(0)
+    a, b, c = random_system(2, 1, 1, rng)
+    u = rng.standard_normal((1000, 1))
+    clean = dlsim(a, b, c, u)
+    kinds = set()
+    for seed in range(10):
+        y = clean + 0.1 * clean.std() * np.random.default_rng(1000 + seed).standard_normal(clean.shape)
+        iv = identify(u, y, 0.1, indices=[2], asymmetric=False).model
+        ls = identify(u, y, 0.1, indices=[2], asymmetric=False, method="ls").model
+        kept_ls = np.array_equal(iv.parameter_vector(), ls.parameter_vector())
+        kinds.add(kept_ls)
+        words = "least squares (kept: no instrumental-variable pass" if kept_ls else "instrumental variables"
+        assert iv.uncertainty.method.startswith(words)
+        assert ls.uncertainty.method.startswith("least squares, sandwich")
+    assert kinds == {True, False}  # both cases met on these seeds

@@ -36,6 +36,7 @@ def test_packaged_design_models_are_what_the_pipeline_produces(default_results):
         np.testing.assert_allclose(packaged.lam, fresh.lam, rtol=1e-9)
         assert packaged.observability_indices == fresh.observability_indices == (2, 2)
         assert packaged.fit["seed"] == DEFAULT_SEED
+        assert packaged.uncertainty.method == fresh.uncertainty.method  # which estimate was kept
         np.testing.assert_allclose(
             packaged.fit["validation_low_frequency"]["model"]["see"],
             fresh.fit["validation_low_frequency"]["model"]["see"],

@@ -52,6 +52,20 @@ def theta_covariance_factor(
     return bread @ root * np.sqrt(n / max(n - k / len(phis), 1))
 
 
+def kept_estimator(fit: _Fit, method: str) -> str:
+    """The estimator whose estimate ``fit`` holds, in words: for ``method="iv"`` least squares
+    where no instrumental-variable pass simulated the record better (least squares is biased under
+    white output noise, which its intervals do not cover)."""
+    if fit.instruments is not fit.phis:
+        return "instrumental variables"
+    if method == "iv":
+        return (
+            "least squares (kept: no instrumental-variable pass simulated the record better; biased "
+            "under white output noise, so the intervals may under-cover)"
+        )
+    return "least squares"
+
+
 def parameter_uncertainty(fit: _Fit, y: np.ndarray, method: str) -> ParameterUncertainty:
     """Covariance of the fitted model's free parameters (K, H, B, lambda) from its regression."""
     residuals = fit.residuals(y)
@@ -67,8 +81,8 @@ def parameter_uncertainty(fit: _Fit, y: np.ndarray, method: str) -> ParameterUnc
     return ParameterUncertainty(
         tuple(fit.model.parameter_names()),
         0.5 * (cov + cov.T),
-        method=f"{'instrumental variables' if method == 'iv' else 'least squares'}, sandwich covariance "
-        f"with {lags} lags of the equation error, delta method to the model parameters",
+        method=f"{kept_estimator(fit, method)}, sandwich covariance with {lags} lags of the equation "
+        "error, delta method to the model parameters",
         samples=int(y.shape[0]),
     )
 
