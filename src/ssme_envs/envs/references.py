@@ -8,6 +8,7 @@ the uniforms and the steps before it alone), so a prefix equals the same steps o
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from functools import cache
@@ -24,6 +25,7 @@ FAULT_KINDS = ("stuck_valve", "sensor_bias", "gain_loss")
 # s: no env's episode is longer; refused here, a later (or infinite) time would overflow the
 # rounding to a step before the env's own "beyond the episode" check
 MAX_FAULT_TIME = MAX_EPISODE_SECONDS
+_BLOCK_NUMBERS = 1 << 16  # numbers per row block of normal_pairs: 256 KiB arrays, which stay in cache
 
 
 def check_reference(kind: str) -> str:
@@ -363,9 +365,15 @@ def normal_pairs(
     computed once."""
     if out is None:
         out = np.empty((2, stop - start, *uniforms.shape[1:]), dtype=np.float32)
-    radius, angle = _radius_and_angle(uniforms, half, start, stop)
-    _waves(np.cos, radius, angle, out[0])
-    _waves(np.sin, radius, angle, out[1])
+    # pairs a few rows at a time where a row holds many envs: their temporaries then stay in
+    # cache, where a whole block of thousands of envs spills to memory and faults in fresh pages
+    # (elementwise work: the same bits in any rows)
+    rows = max(1, _BLOCK_NUMBERS // max(1, math.prod(uniforms.shape[1:])))
+    for lo in range(start, stop, rows):
+        hi = min(stop, lo + rows)
+        radius, angle = _radius_and_angle(uniforms, half, lo, hi)
+        _waves(np.cos, radius, angle, out[0, lo - start : hi - start])
+        _waves(np.sin, radius, angle, out[1, lo - start : hi - start])
     return out
 
 
@@ -375,11 +383,15 @@ def _overlap(parts: list) -> bool:
 
 def _radius_and_angle(uniforms: Uniforms, half: int, start: int, stop: int) -> tuple[np.ndarray, np.ndarray]:
     """``R(u_i)`` and ``2 pi u_half+i`` for the pairs i in [start, stop), float32."""
-    radius = np.log1p(-np.ascontiguousarray(uniforms[start:stop], dtype=np.float32))  # 1 - u in (0, 1]
+    radius = np.ascontiguousarray(uniforms[start:stop], dtype=np.float32)
+    # in place where the read made a new array (the vector envs' draws), else into a new one:
+    # the uniforms may be the caller's (a slice of an array is a view, its base set)
+    radius = np.negative(radius, out=radius if radius.base is None else None)
+    np.log1p(radius, out=radius)  # 1 - u in (0, 1]
     radius *= -2.0
     np.sqrt(radius, out=radius)
-    angular = np.ascontiguousarray(uniforms[half + start : half + stop], dtype=np.float32)
-    return radius, angular * np.float32(2.0 * np.pi)  # a new array: the uniforms may be the caller's
+    angle = np.ascontiguousarray(uniforms[half + start : half + stop], dtype=np.float32)
+    return radius, np.multiply(angle, np.float32(2.0 * np.pi), out=angle if angle.base is None else None)
 
 
 def _waves(wave: np.ufunc, radius: np.ndarray, angle: np.ndarray, out: np.ndarray) -> None:
