@@ -73,7 +73,6 @@ def _shipped_ppo(env: Any, design: str) -> Controller:
     return policy_controller(load_trained(shipped_policy(env_id, design)), env, env_id)
 
 
-# name -> (factory(env, design), the env ids it serves, the design model when none is named)
 # name -> (factory of env and design model, the envs it serves, its default design model: None for
 # a controller designed on no model, which takes none)
 CONTROLLERS: dict[str, tuple[Callable[[Any, Any], Controller], tuple[str, ...], str | None]] = {
