@@ -138,11 +138,12 @@ def parse_controller(spec: str, env_id: str, allow_pickle: bool = False) -> Call
             f"unknown controller {spec!r} for {env_id}; choose from {', '.join(valid)} or {trained}"
         )
     factory, default = CONTROLLERS[name][0], CONTROLLERS[name][2]
-    if design and not takes_design(name):
-        raise ValueError(f"{spec!r}: the {name} controller is designed on no model; write {name!r}")
+    if default is None:  # designed on no model (takes_design)
+        if design:
+            raise ValueError(f"{spec!r}: the {name} controller is designed on no model; write {name!r}")
+        return lambda env: factory(env, None)
     design = design or default
-    variant = name == "ppo" and design in POLICY_VARIANTS
-    if takes_design(name) and design not in DESIGN_SOURCES and not variant:
+    if design not in DESIGN_SOURCES and not (name == "ppo" and design in POLICY_VARIANTS):
         raise ValueError(
             f"unknown design model {design!r} in {spec!r}; choose from {', '.join(DESIGN_SOURCES)}"
         )

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from agents.json_fields import file_problem
-from agents.normalization import NORMALIZATION, read_normalization
+from agents.normalization import NORMALIZATION, Normalization, read_normalization
 from agents.policy_files import (
     PICKLE_WARNING,
     POLICY_JSON,
@@ -41,7 +41,7 @@ def load_sb3_zip(path: Path, algo: str, *, allow_pickle: bool = False) -> Loaded
             "(ssme-envs evaluate --allow-pickle) to load it anyway"
         )
     algorithm = algorithm_class(algo)
-    check_sb3_zip(path)  # our own errors (the file, the normalization beside it) raised before SB3's
+    normalization = check_sb3_zip(path)  # our own errors (the file, the normalization) before SB3's
     print(f"warning: {path}: {PICKLE_WARNING}", file=sys.stderr)
     try:
         model = algorithm.load(path, device="cpu")
@@ -49,18 +49,17 @@ def load_sb3_zip(path: Path, algo: str, *, allow_pickle: bool = False) -> Loaded
         raise
     except Exception as exc:  # SB3 on a damaged zip: KeyError, AssertionError, JSON errors, ...
         raise sb3_zip_error(path, algo, exc) from None
-    beside = path.parent / NORMALIZATION
-    normalization = read_normalization(beside) if beside.is_file() else None
     if normalization is None:
         print(f"warning: no {NORMALIZATION} beside {path}: observations go to the policy unnormalized",
               file=sys.stderr)  # fmt: skip
     return LoadedPolicy(model.policy, algo, None, normalization, path)
 
 
-def check_sb3_zip(path: Path) -> None:
+def check_sb3_zip(path: Path) -> Normalization | None:
     """Before SB3 opens an SB3 ``.zip`` (with ``allow_pickle``): ValueError naming ``path`` unless it
     is a regular file, or naming the ``normalization.json`` beside it if that one does not read
-    (so that no error of ours is raised from inside SB3's load: see :func:`sb3_zip_error`)."""
+    (so that no error of ours is raised from inside SB3's load: see :func:`sb3_zip_error`).
+    Returns the statistics beside it, None where there is no such file."""
     path = Path(path)
     problem = file_problem(path)
     if problem == "missing":
@@ -70,9 +69,10 @@ def check_sb3_zip(path: Path) -> None:
     beside = path.parent / NORMALIZATION
     problem = file_problem(beside)
     if problem is None:
-        read_normalization(beside)
-    elif problem != "missing":  # not skipped: the policy would see unnormalized observations
+        return read_normalization(beside)
+    if problem != "missing":  # not skipped: the policy would see unnormalized observations
         raise ValueError(f"{beside}: not valid JSON: it is {problem}, not a regular file")
+    return None
 
 
 def sb3_zip_error(path: Path, algo: str, exc: Exception) -> ValueError:

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import functools
 import time
-from collections.abc import Callable, Hashable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -151,13 +151,11 @@ def check_scenarios(env_id: str, names: Sequence[str]) -> list[str]:
     return list(names)
 
 
-def check_distinct(names: Sequence[Hashable], what: str) -> None:
+def check_distinct(names: Sequence[Any], what: str) -> None:
     """ValueError naming the first of ``names`` listed twice (its runs would be stored once)."""
-    seen: set[Hashable] = set()
-    for name in names:
-        if name in seen:
+    for i, name in enumerate(names):
+        if name in names[:i]:  # by equality: unhashable entries are named by their own checks
             raise ValueError(f"{what} {name} is listed twice; list each once")
-        seen.add(name)
 
 
 def make_env(

@@ -10,6 +10,7 @@ was given are ValueErrors naming the file or option; ``ssme-envs`` prints them a
 from __future__ import annotations
 
 import importlib.util
+import os
 import time
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
@@ -57,7 +58,7 @@ def evaluation_inputs(
     """The files and directories an evaluation reads, by name (``prefix`` + plant, + controllers
     SPEC): a plant given as a model.json and the run directories of controller specs."""
     found: dict[str, str | Path] = {}
-    if plant is not None and Path(plant).exists():
+    if isinstance(plant, str | os.PathLike) and Path(plant).exists():  # else the env names it
         found[f"{prefix}plant"] = plant
     specs = [] if controllers is None or isinstance(controllers, Mapping | str) else controllers
     for spec in specs:
