@@ -6,7 +6,7 @@ defaults, repeated over noise seeds. Counts how often the 95 % interval (estimat
 standard errors, delta method on the model's covariance) contains the true value, for the first
 10 Markov parameters (40 numbers) and for lambda; a well-calibrated covariance gives about 95 %.
 
-    python experiments/engine_uncertainty_coverage.py [--seeds 200] [--levels 100] [--methods iv,ls]
+    python experiments/engine_uncertainty_coverage.py [--seeds 200] [--levels 100] [--methods iv,ls,oe]
 """
 
 from __future__ import annotations
@@ -15,6 +15,7 @@ import numpy as np
 from tqdm import tqdm
 
 from ssme_envs.identification import identify
+from ssme_envs.identification.arguments import METHODS
 from ssme_envs.identification.covariance import markov_standard_errors
 from ssme_envs.models import POWER_LEVELS, TruthConfig, published_model, simulate
 from ssme_envs.script_options import comma_choices, float_within, int_within, script_parser
@@ -38,7 +39,7 @@ def main() -> None:
         help="std, fraction of each output's spread",
     )
     parser.add_argument(
-        "--methods", type=comma_choices(("iv", "ls")), default="iv", help="comma-separated: iv, ls"
+        "--methods", type=comma_choices(METHODS), default="iv", help=f"comma-separated: {', '.join(METHODS)}"
     )
     args = parser.parse_args()
     u = prbs(1016, amplitude=0.01)

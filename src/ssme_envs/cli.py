@@ -107,7 +107,11 @@ def build_parser() -> argparse.ArgumentParser:
         "--rank-tol", type=number, default=0.1, help="rank-search threshold (default: %(default)s)"
     )
     engine.add_argument(
-        "--method", choices=("iv", "ls"), default="iv", help="parameter estimator (default: %(default)s)"
+        "--method",
+        choices=("iv", "ls", "oe"),  # identification.arguments.METHODS (not imported here: heavy)
+        default="iv",
+        help="parameter estimator: instrumental variables, least squares, or output error (slower; "
+        "intervals right under white output noise where iv falls back to ls) (default: %(default)s)",
     )
     engine.add_argument("--symmetric", action="store_true", help="do not estimate the lambda gains")
     engine.add_argument(

@@ -17,7 +17,10 @@ structure, in :mod:`.alpha_fit`):
    pattern leaves out (it covers only the systems without such a dependency). With
    ``method="iv"`` (default) two instrumental-variable passes follow, the instruments being
    the lags of the previous model's simulated output: consistent under white output noise,
-   and identical to least squares on noise-free data.
+   and identical to least squares on noise-free data. A pass is kept only if its model
+   simulates the record better, so least squares can stay, biased under white output noise.
+   ``method="oe"`` then minimizes the simulation error itself (:mod:`.output_error`): consistent
+   under white output noise whatever the passes did, at the cost of an optimization.
 
 3. **Asymmetric gains** (eqs 36-45). For a constant-amplitude (binary) input
    ``u* = u + (lambda - 1) |u|`` is ``u`` plus a constant, so the regression's constant
@@ -30,7 +33,8 @@ structure, in :mod:`.alpha_fit`):
    ``A = A_o + K C``, ``C = H [0 I]`` (eqs 5-8 with the general ``H``; ``H = I`` for Table I).
 
 5. **Uncertainty** (:mod:`.covariance`): the regression's sandwich covariance, carried to the
-   model's free parameters by the delta method, stored as ``model.uncertainty``.
+   model's free parameters by the delta method, stored as ``model.uncertainty``; for
+   ``method="oe"`` the inverse Gauss-Newton information of the simulation error.
 """
 
 from __future__ import annotations
@@ -43,7 +47,7 @@ import numpy as np
 from ssme_envs.identification.alpha_fit import _binary_amplitudes, _Fit, _fit, _input_features
 from ssme_envs.identification.arguments import check_arguments, real_record
 from ssme_envs.identification.covariance import parameter_uncertainty
-from ssme_envs.identification.output_error import held_out_criterion, refine_contenders
+from ssme_envs.identification.output_error import fit_output_error, held_out_criterion, refine_contenders
 from ssme_envs.identification.records import check_magnitudes
 from ssme_envs.identification.structure import (
     DEFAULT_MAX_INDEX,
@@ -177,8 +181,12 @@ def identify(
         (:func:`estimate_indices`) proposes its index set and the sets one decision away, and the
         one with the lowest BIC of its simulation error is kept (``result.search`` holds every
         candidate and the margin).
-    method : {"iv", "ls"}
-        "ls" is eq 27 as in the paper; "iv" adds two instrumental-variable passes.
+    method : {"iv", "ls", "oe"}
+        "ls" is eq 27 as in the paper; "iv" adds two instrumental-variable passes, each kept only
+        if it simulates the record better; "oe" starts from "iv" and minimizes the simulation
+        error (output error): under white output noise its intervals hold where "iv" kept the
+        biased least-squares estimate (``model.uncertainty.method`` says which was kept). It
+        needs a stable estimate to start from.
     asymmetric : bool
         Estimate the lambda gains of eq 36 (otherwise lambda = 1).
     max_index, rank_tol : int >= 1, float in (0, 1)
@@ -264,6 +272,14 @@ def identify(
         fit = _fit(AlphaStructure.from_indices(indices), u, y, dt, method, asymmetric, names)
     if search is not None:
         fit.model.fit["structure"] = search.to_dict()
+    if method == "oe":
+        lam_free = np.full(u.shape[1], asymmetric)
+        binary = ~np.isnan(_binary_amplitudes(u, in_names)) if asymmetric else lam_free
+        model, intercept, cov = fit_output_error(
+            fit.model, fit.intercept, u, y, lam_free, binary, uncertainty
+        )
+        model.uncertainty = cov
+        return Identification(model, search, intercept, method)
     if uncertainty:
         fit.model.uncertainty = parameter_uncertainty(fit, y, method)
     return Identification(fit.model, search, fit.intercept, method)

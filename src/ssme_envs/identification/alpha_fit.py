@@ -132,7 +132,8 @@ def _fit(
     asymmetric: bool,
     names: tuple[tuple[str, ...], tuple[str, ...]],
 ) -> _Fit:
-    """Least squares (eq 27), then for ``method="iv"`` up to two instrumental-variable passes."""
+    """Least squares (eq 27), then for ``method="iv"`` (and "oe", which starts from it) up to two
+    instrumental-variable passes."""
     in_names, out_names = names
     m, p = u.shape[1], y.shape[1]
     if structure.n_outputs != p:
@@ -175,7 +176,7 @@ def _fit(
     model, intercept = build(thetas)
     best, simulated = _simulation_error(model, u, y)
     fit = _Fit(model, thetas, phis, phis, intercept, simulated, start, build)
-    if method == "iv":
+    if method in ("iv", "oe"):
         # Each pass takes the previous model's simulated output as instruments; a pass is kept
         # only if its model is stable and simulates the record at least as well (weak
         # instruments can otherwise throw the estimate away from the least-squares one).

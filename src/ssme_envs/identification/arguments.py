@@ -20,7 +20,7 @@ from ssme_envs.identification.structure import check_search_length
 from ssme_envs.models.linear import check_dt, describe, holds_bool, masked_elements
 
 REAL_KINDS = "fiu"  # numpy dtype kinds of real numbers: bool, complex, strings and objects are not
-METHODS = ("iv", "ls")
+METHODS = ("iv", "ls", "oe")  # identify()'s estimators, described there
 
 
 class ArgumentTypeError(TypeError, ValueError):
@@ -191,7 +191,7 @@ def check_arguments(
         the indices or the structure search.
     """
     if not isinstance(method, str) or method not in METHODS:
-        raise ValueError(f"method must be 'iv' or 'ls', got {describe(method)}")
+        raise ValueError(f"method must be one of {', '.join(map(repr, METHODS))}, got {describe(method)}")
     dt = check_dt(dt)
     _flag(asymmetric, "asymmetric")
     _flag(uncertainty, "uncertainty")

@@ -61,7 +61,7 @@ def kept_estimator(fit: _Fit, method: str) -> str:
     if method == "iv":
         return (
             "least squares (kept: no instrumental-variable pass simulated the record better; biased "
-            "under white output noise, so the intervals may under-cover)"
+            "under white output noise, so the intervals may under-cover: method 'oe' corrects both)"
         )
     return "least squares"
 

@@ -1,21 +1,33 @@
-"""Output-error refinement of an alpha-canonical model: its free parameters moved to minimize the
+"""Output-error estimation of an alpha-canonical model: its free parameters moved to minimize the
 simulation error on a record (a prediction-error method with the output-error noise model).
 
-The structure choice compares index sets by how well their models simulate held-out data. The
-instrumental-variable estimate of a weakly excited or weakly observable mode is noisy, and a
-larger structure can then simulate better only because its extra parameters soak up that
-estimation error, not because the system needs them. Refining each close contender on the
-simulation error it is judged by takes that noise out of the comparison.
+Two uses:
+
+- :func:`refine`, in the structure choice. It compares index sets by how well their models
+  simulate held-out data. The instrumental-variable estimate of a weakly excited or weakly
+  observable mode is noisy, and a larger structure can then simulate better only because its
+  extra parameters soak up that estimation error, not because the system needs them. Refining
+  each close contender on the simulation error it is judged by takes that noise out of the
+  comparison.
+- :func:`fit_output_error`, ``identify(method="oe")``: the estimate itself and its covariance.
+  Under white output noise it is consistent whatever the instrumental-variable passes did, and
+  its intervals are those of the Gauss-Newton information (Ljung, System Identification, 2nd ed.,
+  eq 9.17): the least-squares fallback of ``method="iv"`` is biased there, and its intervals
+  under-cover.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
+import scipy.linalg
 import scipy.optimize
 
 from ssme_envs.identification.metrics import filter_prediction
 from ssme_envs.identification.structure import StructureSearch
 from ssme_envs.models.statespace import AlphaCanonicalModel, asymmetric_gain
+from ssme_envs.models.uncertainty import ParameterUncertainty, jacobian
 
 # Simulation errors below this fraction of an output's spread are round-off (exact fits).
 CRITERION_FLOOR = 1e-10
@@ -30,6 +42,46 @@ EVALUATIONS_PER_PARAMETER = 30
 # N log(mse) across candidates, which a change of 0.1 % in mse moves by N / 1000 (under 1 for the
 # held-out parts of typical records), far below the margins that decide.
 COST_TOLERANCE = 1e-3
+# The estimate itself (method="oe") is solved to round-off: its covariance is taken where the
+# gradient vanishes.
+ESTIMATE_TOLERANCE = 1e-12
+ESTIMATE_EVALUATIONS_PER_PARAMETER = 200
+# The residuals' whiteness (Ljung-Box, over this many lags) is checked at this level: the
+# intervals assume white output noise, and the covariance's method says when the record refutes it.
+WHITENESS_LAGS = 20
+WHITENESS_LEVEL = 0.01
+# Residual entries an unstable or overflowing candidate gets: larger than any the stable start
+# has, they keep the trust region away without breaking the solver's arithmetic.
+OUTSIDE = 1e3
+
+
+def _scaled_errors(
+    model: AlphaCanonicalModel, u: np.ndarray, y: np.ndarray, free: np.ndarray | None = None,
+    basis: np.ndarray | None = None,
+) -> Callable[[np.ndarray], np.ndarray]:  # fmt: skip
+    """The residual function of the simulation error scaled by each output's spread, flattened.
+    Its argument: the model's free parameters (those of ``free``, a mask over
+    ``parameter_vector()``; all by default, the others held at the model's values), then the
+    coordinates of a constant output offset in the columns of ``basis`` (p, k), if given."""
+    scale = 1.0 / np.maximum(np.std(y, axis=0), np.finfo(float).tiny)
+    full = model.parameter_vector()
+    free = np.ones(full.size, dtype=bool) if free is None else free
+    size = int(free.sum())
+
+    def residuals(theta: np.ndarray) -> np.ndarray:
+        values = full.copy()
+        values[free] = theta[:size]
+        candidate = model.with_parameters(values)
+        if not candidate.spectral_radius() < 1.0:
+            return np.full(y.size, OUTSIDE)
+        with np.errstate(all="ignore"):
+            simulated = linear_response(candidate, u)
+            if basis is not None:
+                simulated = simulated + basis @ theta[size:]
+            err = (y - simulated) * scale
+        return np.nan_to_num(err, nan=OUTSIDE, posinf=OUTSIDE, neginf=-OUTSIDE).ravel()
+
+    return residuals
 
 
 def refine(
@@ -52,19 +104,8 @@ def refine(
         The refined model, or ``model`` itself when the refinement does not lower the error
         while staying stable (the start is never made worse).
     """
-    scale = 1.0 / np.maximum(np.std(y, axis=0), np.finfo(float).tiny)
     start = model.parameter_vector()
-
-    def residuals(theta: np.ndarray) -> np.ndarray:
-        candidate = model.with_parameters(theta)
-        if not candidate.spectral_radius() < 1.0:
-            # Out of the stable region: a residual vector larger than the start's keeps the
-            # trust region away from it without breaking the solver's arithmetic.
-            return np.full(y.size, 1e3)
-        with np.errstate(all="ignore"):
-            err = (y - linear_response(candidate, u)) * scale
-        return np.nan_to_num(err, nan=1e3, posinf=1e3, neginf=-1e3).ravel()
-
+    residuals = _scaled_errors(model, u, y)
     initial = residuals(start)
     solution = scipy.optimize.least_squares(
         residuals,
@@ -79,6 +120,140 @@ def refine(
         return model
     refined.fit = dict(model.fit)
     return refined
+
+
+def fit_output_error(
+    model: AlphaCanonicalModel,
+    offsets: np.ndarray,
+    u: np.ndarray,
+    y: np.ndarray,
+    lam_free: np.ndarray,
+    binary: np.ndarray,
+    uncertainty: bool = True,
+) -> tuple[AlphaCanonicalModel, np.ndarray, ParameterUncertainty | None]:
+    """The output-error estimate: the free parameters and a constant output offset that minimize
+    the sum of squared simulation errors, each output's weighted by its spread.
+
+    Parameters
+    ----------
+    model : AlphaCanonicalModel
+        Start (the instrumental-variable or least-squares estimate); its structure is kept.
+    offsets : array, shape (p,)
+        Start of the constant output offset (the regression's unexplained intercept).
+    u, y : arrays, shapes (T, m), (T, p)
+        The record, as deviations from the operating point.
+    lam_free, binary : bool arrays, shape (m,)
+        The inputs whose lambda is estimated (the others' is held), and those among them that are
+        binary. A binary input's lambda shifts the outputs by a constant along its static gain
+        (eq 42), so the offset is estimated only across those directions (none when they span the
+        outputs), as the regression's eq 42 does.
+    uncertainty : bool
+        Also return the parameters' covariance.
+
+    Returns
+    -------
+    model, offsets, uncertainty
+        The estimate (``model.fit`` kept), its offset, and the covariance of its free parameters
+        (the offset marginalized; held parameters 0): the inverse of the Gauss-Newton information
+        with each output's residual variance, which assumes white output noise; its ``method``
+        says when the residuals are not white (Ljung-Box at ``WHITENESS_LEVEL``). None when not
+        asked for.
+
+    Raises
+    ------
+    ValueError
+        The start is unstable (a simulation error is not defined), or the estimate is.
+    """
+    radius = model.spectral_radius()
+    if not radius < 1.0:
+        raise ValueError(
+            f"method 'oe' simulates the model, and the instrumental-variable estimate it starts from "
+            f"is unstable (spectral radius {radius:.4g}): use method 'iv' for a record of an unstable plant"
+        )
+    full = model.parameter_vector()
+    free = np.ones(full.size, dtype=bool)
+    free[full.size - model.n_inputs :] = lam_free
+    basis = scipy.linalg.null_space(model.dc_gain()[:, binary & lam_free].T)
+    residuals = _scaled_errors(model, u, y, free, basis)
+    start = np.concatenate([full[free], basis.T @ offsets])
+    solution = scipy.optimize.least_squares(
+        residuals,
+        start,
+        method="trf",
+        x_scale="jac",
+        ftol=ESTIMATE_TOLERANCE,
+        xtol=ESTIMATE_TOLERANCE,
+        gtol=ESTIMATE_TOLERANCE,
+        max_nfev=ESTIMATE_EVALUATIONS_PER_PARAMETER * start.size,
+    )
+    size = int(free.sum())
+    full[free] = solution.x[:size]
+    estimate = model.with_parameters(full)
+    if not estimate.spectral_radius() < 1.0:
+        raise ValueError("the output-error estimate is unstable: use method 'iv'")
+    estimate.fit = dict(model.fit)
+    offset = basis @ solution.x[size:]
+    if not uncertainty:
+        return estimate, offset, None
+    cov = np.zeros((full.size, full.size))
+    free_cov, note = _information_covariance(residuals, solution.x, size, y.shape, estimate.output_names)
+    cov[np.ix_(free, free)] = free_cov
+    return (
+        estimate,
+        offset,
+        ParameterUncertainty(
+            tuple(estimate.parameter_names()),
+            cov,
+            method="output error, inverse Gauss-Newton information with each output's residual variance "
+            f"(white output noise assumed){note}",
+            samples=y.shape[0],
+        ),
+    )
+
+
+def _information_covariance(
+    residuals: Callable[[np.ndarray], np.ndarray], theta: np.ndarray, size: int, shape: tuple[int, int],
+    names: tuple[str, ...],
+) -> tuple[np.ndarray, str]:  # fmt: skip
+    """Covariance of the first ``size`` entries of ``theta`` (the model's free parameters, then the
+    offset's) at the output-error estimate: (J^T W J)^-1, J the scaled residuals' Jacobian (central
+    differences), W each output's inverse residual variance, the offset marginalized; and the
+    caveat for the method text where the residuals of an output are not white ("" otherwise)."""
+    samples, p = shape
+    errors = residuals(theta).reshape(shape)
+    jac = jacobian(residuals, theta).reshape(samples, p, theta.size)
+    dof = max(samples - theta.size / p, 1.0)
+    sigma = np.sqrt(np.sum(errors**2, axis=0) / dof)
+    weighted = (jac / np.maximum(sigma, np.finfo(float).tiny)[None, :, None]).reshape(-1, theta.size)
+    # through the SVD: the information's condition number is the square of the Jacobian's
+    _, singular, vt = np.linalg.svd(weighted, full_matrices=False)
+    kept = singular > singular[0] * np.finfo(float).eps * max(weighted.shape)
+    root = vt[kept].T / singular[kept]
+    cov = root[:size] @ root[:size].T
+    whiteness = [_ljung_box(errors[:, i]) for i in range(p)]
+    rejected = [
+        f"{n} (Ljung-Box p = {v:.2g})" for n, v in zip(names, whiteness, strict=True) if v < WHITENESS_LEVEL
+    ]
+    note = (
+        f"; the residuals of {', '.join(rejected)} are not white, so the intervals may under-cover"
+        if rejected
+        else ""
+    )
+    return 0.5 * (cov + cov.T), note
+
+
+def _ljung_box(errors: np.ndarray) -> float:
+    """p-value of the Ljung-Box test that ``errors`` are white, over ``WHITENESS_LAGS`` lags."""
+    import scipy.stats  # only here, and a heavy import
+
+    centered = errors - errors.mean()
+    n, power = len(centered), float(centered @ centered)
+    lags = min(WHITENESS_LAGS, n - 1)
+    if power == 0.0 or lags < 1:
+        return 1.0
+    rho = np.array([centered[k:] @ centered[:-k] for k in range(1, lags + 1)]) / power
+    statistic = n * (n + 2) * float(np.sum(rho**2 / (n - np.arange(1, lags + 1))))
+    return float(scipy.stats.chi2.sf(statistic, lags))
 
 
 def linear_response(model: AlphaCanonicalModel, u: np.ndarray) -> np.ndarray:
