@@ -177,3 +177,14 @@ def test_the_command_line_offers_the_library_methods_and_defaults() -> None:
 def _subparser(parser: argparse.ArgumentParser, name: str) -> argparse.ArgumentParser:
     (commands,) = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
     return commands.choices[name]
+
+
+def test_oe_on_an_exact_record_gives_the_system_and_a_finite_covariance_without_caveat() -> None:
+    rng = np.random.default_rng(5)
+    a, b, c = random_system(4, 2, 2, rng)
+    u = np.sign(rng.standard_normal((800, 2)))
+    y = scipy.signal.dlsim((a, b, c, np.zeros((2, 2)), 1.0), u)[1]
+    model = identify(u, y, 1.0, method="oe").model
+    np.testing.assert_allclose(model.markov_parameters(MARKOV), _markov(a, b, c, MARKOV), atol=1e-8)
+    assert np.all(np.isfinite(model.uncertainty.covariance))
+    assert "not white" not in model.uncertainty.method

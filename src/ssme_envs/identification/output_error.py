@@ -224,13 +224,15 @@ def _information_covariance(
     jac = jacobian(residuals, theta).reshape(samples, p, theta.size)
     dof = max(samples - theta.size / p, 1.0)
     sigma = np.sqrt(np.sum(errors**2, axis=0) / dof)
-    weighted = (jac / np.maximum(sigma, np.finfo(float).tiny)[None, :, None]).reshape(-1, theta.size)
+    # an exact record's residuals are round-off: floored as the structure choice floors them
+    weighted = (jac / np.maximum(sigma, CRITERION_FLOOR)[None, :, None]).reshape(-1, theta.size)
     # through the SVD: the information's condition number is the square of the Jacobian's
     _, singular, vt = np.linalg.svd(weighted, full_matrices=False)
     kept = singular > singular[0] * np.finfo(float).eps * max(weighted.shape)
     root = vt[kept].T / singular[kept]
     cov = root[:size] @ root[:size].T
-    whiteness = [_ljung_box(errors[:, i]) for i in range(p)]
+    # (round-off residuals of an exact record are not tested: they are no noise to assume white)
+    whiteness = [_ljung_box(errors[:, i]) if sigma[i] > CRITERION_FLOOR else 1.0 for i in range(p)]
     rejected = [
         f"{n} (Ljung-Box p = {v:.2g})" for n, v in zip(names, whiteness, strict=True) if v < WHITENESS_LEVEL
     ]
