@@ -77,6 +77,11 @@ CASES: dict[str, list[tuple[tuple[str, ...], str]]] = {
         (("--episodes", "1000000000000000"), "--episodes"),
     ],
     "robustness_study": [(("--plants", "0"), "--plants")],
+    "slow_mode_coverage": [
+        (("--seeds", "0"), "--seeds"),
+        (("--noise", "0"), "--noise"),
+        (("--noise", "nan"), "--noise"),
+    ],
     "speed_limits": [
         (("--rounds", "0"), "--rounds"),
         (("--rounds", "101"), "--rounds"),
