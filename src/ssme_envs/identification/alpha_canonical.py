@@ -273,10 +273,9 @@ def identify(
     if search is not None:
         fit.model.fit["structure"] = search.to_dict()
     if method == "oe":
-        lam_free = np.full(u.shape[1], asymmetric)
-        binary = ~np.isnan(_binary_amplitudes(u, in_names)) if asymmetric else lam_free
+        binary = ~np.isnan(fit.gamma)
         model, intercept, cov = fit_output_error(
-            fit.model, fit.intercept, u, y, lam_free, binary, uncertainty
+            fit.model, fit.intercept, u, y, asymmetric, binary, uncertainty
         )
         model.uncertainty = cov
         return Identification(model, search, intercept, method)

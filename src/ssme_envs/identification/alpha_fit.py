@@ -115,6 +115,7 @@ class _Fit:
     intercept: np.ndarray
     simulated: np.ndarray | None
     start: int
+    gamma: np.ndarray  # per input: a binary input's amplitude, NaN for the others (all without lambda)
     build: Callable[[list[np.ndarray]], tuple[AlphaCanonicalModel, np.ndarray]]
 
     def residuals(self, y: np.ndarray) -> list[np.ndarray]:
@@ -175,7 +176,7 @@ def _fit(
 
     model, intercept = build(thetas)
     best, simulated = _simulation_error(model, u, y)
-    fit = _Fit(model, thetas, phis, phis, intercept, simulated, start, build)
+    fit = _Fit(model, thetas, phis, phis, intercept, simulated, start, gamma, build)
     if method in ("iv", "oe"):
         # Each pass takes the previous model's simulated output as instruments; a pass is kept
         # only if its model is stable and simulates the record at least as well (weak
@@ -199,7 +200,9 @@ def _fit(
             if not error <= best:
                 break
             best = error
-            fit = _Fit(candidate, thetas, phis, instruments, intercept, candidate_simulated, start, build)
+            fit = _Fit(
+                candidate, thetas, phis, instruments, intercept, candidate_simulated, start, gamma, build
+            )
     return fit
 
 

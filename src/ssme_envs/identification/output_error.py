@@ -127,7 +127,7 @@ def fit_output_error(
     offsets: np.ndarray,
     u: np.ndarray,
     y: np.ndarray,
-    lam_free: np.ndarray,
+    asymmetric: bool,
     binary: np.ndarray,
     uncertainty: bool = True,
 ) -> tuple[AlphaCanonicalModel, np.ndarray, ParameterUncertainty | None]:
@@ -142,11 +142,12 @@ def fit_output_error(
         Start of the constant output offset (the regression's unexplained intercept).
     u, y : arrays, shapes (T, m), (T, p)
         The record, as deviations from the operating point.
-    lam_free, binary : bool arrays, shape (m,)
-        The inputs whose lambda is estimated (the others' is held), and those among them that are
-        binary. A binary input's lambda shifts the outputs by a constant along its static gain
-        (eq 42), so the offset is estimated only across those directions (none when they span the
-        outputs), as the regression's eq 42 does.
+    asymmetric : bool
+        Estimate lambda (otherwise it is held at the model's value).
+    binary : bool array, shape (m,)
+        The binary inputs whose lambda is estimated. Such a lambda shifts the outputs by a constant
+        along the input's static gain (eq 42), so the offset is estimated only across those
+        directions (none when they span the outputs), as the regression's eq 42 does.
     uncertainty : bool
         Also return the parameters' covariance.
 
@@ -172,8 +173,8 @@ def fit_output_error(
         )
     full = model.parameter_vector()
     free = np.ones(full.size, dtype=bool)
-    free[full.size - model.n_inputs :] = lam_free
-    basis = scipy.linalg.null_space(model.dc_gain()[:, binary & lam_free].T)
+    free[full.size - model.n_inputs :] = asymmetric
+    basis = scipy.linalg.null_space(model.dc_gain()[:, binary].T)
     residuals = _scaled_errors(model, u, y, free, basis)
     start = np.concatenate([full[free], basis.T @ offsets])
     solution = scipy.optimize.least_squares(
