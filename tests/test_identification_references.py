@@ -317,10 +317,23 @@ def test_dsr_e_past_horizon_refinement_keeps_a_model():
 
 def test_an_unstable_identified_a_is_named_as_such_not_blamed_on_the_input():
     """Seed 125's samples 2000-3999 in the coloured-noise setting: the first pass (J = 12) gives A
-    a spurious pole beyond the unit circle. The error names it, not the (white) input."""
+    a spurious pole beyond the unit circle. The error names it, not the (white) input. Both
+    horizons are given (those of the automatic first pass, L = 5 for two outputs): with either
+    left automatic, dsr_e retries other horizons and finds a stable model here."""
     (a, _, c, _, _, _), u, y, _, _ = _noisy_record(125, coloured=True)
     with pytest.raises(ValueError, match=r"the identified A is unstable \(spectral radius 1\.0"):
-        dsr_e(u[2000:4000], y[2000:4000], 1.0, order=a.shape[0] + c.shape[0])
+        dsr_e(
+            u[2000:4000], y[2000:4000], 1.0, order=a.shape[0] + c.shape[0], past_horizon=12, future_horizon=5
+        )
+
+
+def test_the_same_record_with_automatic_horizons_is_retried_to_a_stable_model():
+    """The record above with the horizons left automatic: the unstable first pass is retried at
+    other horizons, and the model kept has a stable A and predictor (true spectral radius 0.89)."""
+    (a, _, c, _, _, _), u, y, _, _ = _noisy_record(125, coloured=True)
+    model = dsr_e(u[2000:4000], y[2000:4000], 1.0, order=a.shape[0] + c.shape[0]).model
+    assert np.max(np.abs(np.linalg.eigvals(model.A))) < 1.0
+    assert np.max(np.abs(np.linalg.eigvals(model.A - model.K @ model.C))) < 1.0
 
 
 # --- 3. the pipeline on the nonlinear truth against Table II -----------------------------------
