@@ -16,6 +16,7 @@ import sys
 import textwrap
 import threading
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -42,9 +43,14 @@ def _csv(rows: str) -> bytes:
 def assets(tmp_path_factory):
     """A good engine record (r.csv) and a good engine model (m.json), as bytes."""
     tmp = tmp_path_factory.mktemp("assets")
-    write_record(tmp / "r.csv", default_experiment(100)["identification"])
+    record = default_experiment(100)["identification"]
+    write_record(tmp / "r.csv", record)
     identified_model(100).save(tmp / "m.json")
-    return {"r.csv": (tmp / "r.csv").read_bytes(), "m.json": (tmp / "m.json").read_bytes()}
+    # each output moved, within the sample, by each valve at 30 % of the output's spread per valve spread
+    feedthrough = 0.3 * record.y.std(axis=0)[:, None] / record.u.std(axis=0)[None, :]
+    write_record(tmp / "ff.csv", replace(record, y=record.y + record.u @ feedthrough.T))
+    names = ("r.csv", "m.json", "ff.csv")
+    return {name: (tmp / name).read_bytes() for name in names}
 
 
 def _model(assets, **changes) -> bytes:
@@ -127,6 +133,9 @@ CATALOGUE = [
      "NaN or inf", None, 2),
     ("csv-1e300", "a cell 1e300", BAD_CSV, {"bad.csv": _csv(ROWS.replace("0.01,", "1e300,", 1))},
      "squares overflow float64", None, 2),
+    ("csv-feedthrough", "outputs that move with the same sample's valves",
+     ["identify", "engine", "--data", "{d}/ff.csv", "--out", "{d}/out"], {"ff.csv": "asset:ff.csv"},
+     r"direct feedthrough: 'pc' on 'beta_opov'", None, 2),
     ("csv-columns", "no such columns", BAD_CSV, {"bad.csv": b"t,a,b,c,d\n0,1,2,3,4\n0.04,1,2,3,4\n"},
      "unknown column.*beta_opov", None, 2),
     ("csv-dup-header", "'pc' twice in the header", BAD_CSV,

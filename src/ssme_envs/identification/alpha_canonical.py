@@ -47,6 +47,7 @@ import numpy as np
 from ssme_envs.identification.alpha_fit import _binary_amplitudes, _Fit, _fit, _input_features
 from ssme_envs.identification.arguments import check_arguments, real_record
 from ssme_envs.identification.covariance import parameter_uncertainty
+from ssme_envs.identification.feedthrough import check_feedthrough
 from ssme_envs.identification.output_error import fit_output_error, held_out_criterion, refine_contenders
 from ssme_envs.identification.records import check_magnitudes
 from ssme_envs.identification.structure import (
@@ -206,7 +207,9 @@ def identify(
         Before any work, for an argument of the wrong kind or out of range, naming it
         (:func:`~ssme_envs.identification.arguments.check_arguments`; its TypeErrors are
         ValueErrors too), or a record too short for the indices or the structure search; then
-        for a record :func:`check_record` refuses, or one the fit cannot determine.
+        for a record :func:`check_record` refuses, one the fit cannot determine, or one whose
+        outputs respond to the inputs within the sample (direct feedthrough, which the strictly
+        proper form cannot hold: :mod:`.feedthrough`).
     """
     args = check_arguments(
         u,
@@ -270,6 +273,8 @@ def identify(
         fit = _fit(AlphaStructure.from_indices(search.indices), u, y, dt, method, asymmetric, names)
     else:
         fit = _fit(AlphaStructure.from_indices(indices), u, y, dt, method, asymmetric, names)
+    # before the covariance and the output-error search: a feedthrough makes both meaningless
+    check_feedthrough(fit.model, u, y, _names(in_names, u.shape[1], "u"), _names(out_names, y.shape[1], "y"))
     if search is not None:
         fit.model.fit["structure"] = search.to_dict()
     if method == "oe":
