@@ -82,6 +82,7 @@ CASES: dict[str, list[tuple[tuple[str, ...], str]]] = {
         (("--noise", "0"), "--noise"),
         (("--noise", "nan"), "--noise"),
     ],
+    "subspace_order": [(("--seeds", "0"), "--seeds"), (("--seeds", "x"), "--seeds")],
     "speed_limits": [
         (("--rounds", "0"), "--rounds"),
         (("--rounds", "101"), "--rounds"),

@@ -56,7 +56,12 @@ from ssme_envs.identification.innovations_model import (
     second_order_parameters,
     to_continuous,
 )
-from ssme_envs.identification.subspace_checks import check_input_directions, noise_fraction, unstable
+from ssme_envs.identification.subspace_checks import (
+    check_input_directions,
+    noise_fraction,
+    prediction_criterion,
+    unstable,
+)
 from ssme_envs.identification.subspace_horizons import (
     default_future,
     default_past,
@@ -137,14 +142,13 @@ def _projected_future(
     return z
 
 
-def _select_order(singular_values: np.ndarray, max_order: int, noise_free: bool) -> int:
-    """Order at the largest drop in log10 of the normalized singular values (see dsr_e).
+def _order_candidates(singular_values: np.ndarray, max_order: int, noise_free: bool) -> list[int]:
+    """The orders ``1..max_order`` not placed behind round-off (see dsr_e).
 
     With noisy data every direction the past data span carries noise, so a drop to round-off
     marks the rank limit of the horizons, not the system: such a drop is not a candidate.
     """
     s = singular_values / singular_values[0]
-    logs = np.log10(np.maximum(s, np.finfo(float).tiny))
     candidates = [
         n
         for n in range(1, max_order + 1)
@@ -152,8 +156,48 @@ def _select_order(singular_values: np.ndarray, max_order: int, noise_free: bool)
     ]
     if not candidates:
         raise ValueError("the singular values show no order: the record is too short for the horizons")
-    gaps = [logs[n - 1] - logs[n] for n in candidates]
-    return candidates[int(np.argmax(gaps))]
+    return candidates
+
+
+def _largest_drop(singular_values: np.ndarray, candidates: list[int]) -> int:
+    """The candidate order at the largest drop in log10 of the normalized singular values."""
+    logs = np.log10(np.maximum(singular_values / singular_values[0], np.finfo(float).tiny))
+    return candidates[int(np.argmax([logs[n - 1] - logs[n] for n in candidates]))]
+
+
+def _realize(
+    left: np.ndarray, singular_values: np.ndarray, order: int, u: np.ndarray, y: np.ndarray,
+    e: np.ndarray | None, past: int, dt: float,
+) -> InnovationsModel:  # fmt: skip
+    """The model of ``order`` states from the SVD of ``Z``: (A, C) by shift invariance, then B, D
+    and K by regression on the samples from ``past`` on (``e`` None: noise-free, K = 0)."""
+    obs = left[:, :order] * np.sqrt(singular_values[:order])
+    a, c = _shift_invariance(obs, y.shape[1])
+    b, d, k = input_matrices(a, c, u[past:], y[past:], e)
+    return InnovationsModel(a, b, c, d, k, dt)
+
+
+def _bic_order(
+    left: np.ndarray, singular_values: np.ndarray, candidates: list[int], u: np.ndarray, y: np.ndarray,
+    e: np.ndarray, past: int, dt: float,
+) -> tuple[int, InnovationsModel] | None:  # fmt: skip
+    """The candidate order whose model minimizes BIC of the one-step prediction error on the
+    record (rule in dsr_e); None when no candidate's predictor is stable."""
+    m, p = u.shape[1], y.shape[1]
+    count = y.shape[0] - past
+    best = None
+    for order in candidates:
+        try:
+            model = _realize(left, singular_values, order, u, y, e, past, dt)
+        except ValueError:  # e.g. a spurious unstable pole leaves B and D undetermined
+            continue
+        criterion = prediction_criterion(model, u, y, past)
+        if not math.isfinite(criterion):
+            continue
+        bic = count * criterion + math.log(count) * (order * (2 * p + m) + p * m)
+        if best is None or bic < best[0]:
+            best = (bic, order, model)
+    return None if best is None else best[1:]
 
 
 def _shift_invariance(obs: np.ndarray, p: int) -> tuple[np.ndarray, np.ndarray]:
@@ -185,17 +229,19 @@ def _identify_once(
             "estimate (the innovations then absorb the state)"
         )
     most = min(future * p, len(singular_values) - 1)
+    noise = None if noise_free else e
     if order is None:
-        order = _select_order(singular_values, min(max_order, most), noise_free)
+        candidates = _order_candidates(singular_values, min(max_order, most), noise_free)
+        chosen = None if noise_free else _bic_order(left, singular_values, candidates, u, y, e, past, dt)
+        if chosen is not None:
+            return chosen[1], singular_values, chosen[0], noise_free
+        order = _largest_drop(singular_values, candidates)
     elif order > most:
         raise ValueError(
             f"order={order} needs future_horizon >= {math.ceil(order / p)} and past_horizon >= "
             f"{math.ceil((order + 1) / (u.shape[1] + p))} (got {future} and {past})"
         )
-    obs = left[:, :order] * np.sqrt(singular_values[:order])
-    a, c = _shift_invariance(obs, p)
-    b, d, k = input_matrices(a, c, u[past:], y[past:], None if noise_free else e)
-    return InnovationsModel(a, b, c, d, k, dt), singular_values, order, noise_free
+    return _realize(left, singular_values, order, u, y, noise, past, dt), singular_values, order, noise_free
 
 
 def dsr_e(
@@ -235,14 +281,21 @@ def dsr_e(
     Notes
     -----
     **Order selection.** The singular values ``s_1 >= s_2 >= ...`` of ``Z`` are normalized by
-    ``s_1``; the order is the ``n`` in ``1..min(max_order, L p)`` with the largest drop
-    ``log10 s_n - log10 s_(n+1)``, among the ``n`` whose ``s_n / s_1`` exceeds 1e-10 (below that
-    the values are round-off, and gaps between them mean nothing); with noisy data also
-    ``s_(n+1) / s_1`` must exceed 1e-10, since a drop to round-off is then the rank limit of the
-    horizons rather than the system's order. Noise-free data show a drop of ten decades or
-    more at the true order; with noise the values beyond the order sit on a floor that falls as
-    ``1 / sqrt(T)`` relative to ``s_1``. A weak, barely excited mode can
-    have a smaller drop than a strong one: inspect ``singular_values`` and pass ``order=``.
+    ``s_1``; the candidate orders are the ``n`` in ``1..min(max_order, L p)`` whose ``s_n / s_1``
+    exceeds 1e-10 (below that the values are round-off); with noisy data also ``s_(n+1) / s_1``
+    must exceed 1e-10, since a drop to round-off is then the rank limit of the horizons rather
+    than the system's order. A noise-free record (no innovations) takes the candidate with the
+    largest drop ``log10 s_n - log10 s_(n+1)``: ten decades or more at the true order. A noisy
+    one takes the candidate whose model minimizes BIC of its one-step prediction errors on the
+    record, ``N log det(Sigma_n) + log(N) (n (2 p + m) + p m)`` over the ``N = T - J`` samples
+    after the past horizon (candidates whose B and D cannot be fitted or whose predictor is
+    unstable are skipped; the largest drop decides if none is left). The largest drop alone
+    under-orders noisy records: the values beyond the order sit on a floor that falls only as
+    ``1 / sqrt(T)`` relative to ``s_1``, and a weak mode's drop can be smaller than a strong
+    one's. On random stable systems of order 2-6 with 5 % output noise (200 records,
+    ``experiments/results/subspace_order.md``) the largest drop found the order on 36 % of
+    records and the 90th percentile of the model's simulation error was 12 % of the output's
+    spread; BIC found it on 68 %, with 0.67 % (the true order's model: 0.64 %). ``order=`` overrides.
 
     **Past horizon.** The innovations estimate neglects ``(A - K C)^J x(k - J)``. Without
     ``past_horizon``, a first pass uses ``J = max(2 (L + 1), 10)``; then, with ``rho`` the spectral
