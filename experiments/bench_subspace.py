@@ -7,7 +7,8 @@ noise-free std, of ``w`` 0.2 with unit binary inputs), identify from N = 5000 sa
 per method: the order found, the NRMSE fit % of the pure simulation on a fresh noise-free
 record (worst output), the worst relative pole error % after matching poles one to one, and
 the wall time (median of the repeats, after one warm-up call) with the ratio DSR_e / peer.
-Both methods choose the order themselves (DSR_e: largest gap; SIPPY: its default threshold).
+Both methods choose the order themselves (DSR_e: BIC of its one-step prediction errors; SIPPY:
+its default threshold).
 Writes the table to experiments/results/bench_subspace.md as well.
 
 The peer is not a dependency of the package. Install it into the same environment with

@@ -7,6 +7,7 @@ import functools
 import json
 import math
 import re
+import warnings
 
 import numpy as np
 import pytest
@@ -16,6 +17,7 @@ from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
 from ssme_envs.identification import identify
+from ssme_envs.identification.covariance import markov_standard_errors
 from ssme_envs.models import AlphaCanonicalModel, published_model
 from ssme_envs.models.statespace_json import engine_model_from_dict, engine_model_to_dict
 from ssme_envs.signals import prbs
@@ -368,3 +370,25 @@ def test_a_record_in_other_units_gives_the_same_model_in_those_units(input_scale
     first = markov(base.A, base.B, base.C, 6)
     again = markov(scaled.A, scaled.B, scaled.C, 6) * input_scale / output_scale
     assert np.max(np.abs(again - first)) <= 1e-9 * np.max(np.abs(first))
+
+
+@pytest.mark.parametrize("output_scale", [1e-140, 1e-30, 1e-3, 1e3, 1e30, 1e140])
+@pytest.mark.parametrize("method", ["iv", "oe"])
+def test_standard_errors_follow_the_units_to_the_edge_of_float64(output_scale, method):
+    """The Markov parameters' standard errors from a record with its outputs in other units are,
+    in the first record's units, the first record's. Before: "iv" dropped the negative part of
+    its sandwich on raw columns (K's standard errors 7 times larger in units of 1e-3), and
+    overflowed near 1e100 (LinAlgError from eigh; such outputs have finite squares, so they are
+    accepted); "oe" cut the rank of its information on raw columns (B's or K's variance 0 in
+    units of 1e-30 or 1e30)."""
+    rng = np.random.default_rng(4)
+    a, b, c = random_system(2, 2, 2, rng)
+    u = rng.standard_normal((500, 2))
+    y = dlsim(a, b, c, u) + 0.01 * rng.standard_normal((500, 2))
+    base = identify(u, y, 0.1, asymmetric=False, indices=[1, 1], method=method).model
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        scaled = identify(u, y * output_scale, 0.1, asymmetric=False, indices=[1, 1], method=method).model
+    _, first = markov_standard_errors(base, 6)
+    _, again = markov_standard_errors(scaled, 6)
+    np.testing.assert_allclose(again / output_scale, first, rtol=1e-6)

@@ -38,13 +38,18 @@ def theta_covariance_factor(
     where ``J cov J^T`` loses it to round-off when the regression is nearly exact (the bread's
     large entries cancel in ``J``)."""
     g = np.hstack([z * v[:, None] for z, v in zip(instruments, residuals, strict=True)])
+    # Each column through its own size: the window's sum is not positive semi-definite on every
+    # record, and its negative part, dropped below, must be the same in any units (on the raw
+    # columns it is not: K's standard errors changed 7-fold between outputs in units 1e-3 and 1);
+    # and outputs near 1e100, whose squares are still finite, give products beyond float64.
+    sizes = np.maximum(np.max(np.abs(g), axis=0), np.finfo(float).tiny)
+    g = g / sizes
     meat = g.T @ g
     for lag in range(1, lags + 1):
         cross = g[lag:].T @ g[:-lag]
         meat += cross + cross.T
-    # The window's sum is not positive semi-definite on every record; its negative part is noise.
     values, vectors = np.linalg.eigh(0.5 * (meat + meat.T))
-    root = vectors * np.sqrt(np.clip(values, 0.0, None))
+    root = sizes[:, None] * vectors * np.sqrt(np.clip(values, 0.0, None))
     bread = scipy.linalg.block_diag(
         *[np.linalg.inv(z.T @ phi) for z, phi in zip(instruments, phis, strict=True)]
     )

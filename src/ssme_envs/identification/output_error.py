@@ -227,10 +227,14 @@ def _information_covariance(
     sigma = np.sqrt(np.sum(errors**2, axis=0) / dof)
     # an exact record's residuals are round-off: floored as the structure choice floors them
     weighted = (jac / np.maximum(sigma, CRITERION_FLOOR)[None, :, None]).reshape(-1, theta.size)
-    # through the SVD: the information's condition number is the square of the Jacobian's
-    _, singular, vt = np.linalg.svd(weighted, full_matrices=False)
+    # Through the SVD (the information's condition number is the square of the Jacobian's), of
+    # columns brought to one size first: B and the offset scale with the outputs' units and K does
+    # not, and the rank cut on raw columns dropped one kind in extreme units (variance 0).
+    norms = np.linalg.norm(weighted, axis=0)
+    norms = np.where(norms > 0.0, norms, 1.0)
+    _, singular, vt = np.linalg.svd(weighted / norms, full_matrices=False)
     kept = singular > singular[0] * np.finfo(float).eps * max(weighted.shape)
-    root = vt[kept].T / singular[kept]
+    root = vt[kept].T / singular[kept] / norms[:, None]
     cov = root[:size] @ root[:size].T
     # (round-off residuals of an exact record are not tested: they are no noise to assume white)
     whiteness = [_ljung_box(errors[:, i]) if sigma[i] > CRITERION_FLOOR else 1.0 for i in range(p)]
