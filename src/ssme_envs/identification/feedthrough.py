@@ -61,7 +61,9 @@ def feedthrough_estimate(model: AlphaCanonicalModel, u: np.ndarray, y: np.ndarra
     q = _lags(n_samples, m)
     if q < MIN_LAGS:
         return None
-    residual = (y - filter_prediction(model, u, y))[q:]
+    spread_y = np.maximum(y.std(axis=0), np.finfo(float).tiny)
+    # in units of each output's spread: outputs near 1e150 (accepted: finite squares) stay finite
+    residual = (y - filter_prediction(model, u, y))[q:] / spread_y
     rows = n_samples - q
     x = np.column_stack([np.ones(rows)] + [u[q - lag : n_samples - lag] for lag in range(q + 1)])
     # columns scaled to unit size so the normal matrix's condition is the inputs' own
@@ -71,26 +73,23 @@ def feedthrough_estimate(model: AlphaCanonicalModel, u: np.ndarray, y: np.ndarra
     beta = np.linalg.solve(r_x, q_x.T @ residual)
     errors = residual - xs @ beta
     r_inv = np.linalg.inv(r_x)
+    bread = r_inv @ r_inv.T  # (X'X)^-1 = R^-1 R^-T
     bandwidth = math.floor(4.0 * (rows / 100.0) ** (2.0 / 9.0))
     current = slice(1, 1 + m)
     t = np.zeros((y.shape[1], m))
-    coefficient = (beta[current] / norms[current, None]).T
+    coefficient = (beta[current] / norms[current, None]).T  # output spreads per input unit
     for i in range(y.shape[1]):
         scores = xs * errors[:, [i]]
         meat = scores.T @ scores
         for lag in range(1, bandwidth + 1):
             cross = scores[lag:].T @ scores[:-lag]
             meat += (1.0 - lag / (bandwidth + 1.0)) * (cross + cross.T)
-        # (X'X)^-1 = R^-1 R^-T
-        bread = r_inv @ r_inv.T
         variance = np.diag(bread @ meat @ bread)[current]
         se = np.sqrt(np.maximum(variance, 0.0)) / norms[current]
         with np.errstate(divide="ignore", invalid="ignore"):
             t[i] = np.where(se > 0, coefficient[i] / se, np.where(coefficient[i] == 0, 0.0, np.inf))
-    spread_u = u.std(axis=0)
-    spread_y = np.maximum(y.std(axis=0), np.finfo(float).tiny)
-    share = np.abs(coefficient) * spread_u[None, :] / spread_y[:, None]
-    return Feedthrough(coefficient, t, share)
+    share = np.abs(coefficient) * u.std(axis=0)[None, :]
+    return Feedthrough(coefficient * spread_y[:, None], t, share)
 
 
 def check_feedthrough(
