@@ -20,7 +20,9 @@ from an operating point, one row per sample. The steps:
    ``U_f`` and ``E_f`` are removed; ``Z = O M``, so the left singular vectors of ``Z`` span the
    extended observability matrix ``O`` (``L + 1`` block rows, ``n`` columns).
 
-3. **Order** from the singular values of ``Z`` (rule in :func:`dsr_e`).
+3. **Order**: among the candidates the singular values of ``Z`` allow, the largest drop for a
+   noise-free record, else the smallest BIC of the candidate models' one-step prediction errors
+   (which needs step 4 for each candidate; rule in :func:`dsr_e`).
 
 4. **Realization.** ``C`` is the first block row of ``O``, ``A`` the least-squares solution of
    the shift invariance ``O[p:] = O[:-p] A``. ``B``, ``D``, ``K`` and the state at the start
