@@ -29,6 +29,16 @@ if TYPE_CHECKING:
     from ssme_envs.models.statespace import AlphaCanonicalModel
 
 
+def lag_window_meat(scores: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """The sandwich's meat of ``scores`` (T, k): ``S^T S`` plus, for each lag ``l`` from 1,
+    ``weights[l - 1]`` times the lag's cross products and their transpose."""
+    meat = scores.T @ scores
+    for lag, weight in enumerate(weights, start=1):
+        cross = scores[lag:].T @ scores[:-lag]
+        meat += weight * (cross + cross.T)
+    return meat
+
+
 def theta_covariance_factor(
     phis: list[np.ndarray], instruments: list[np.ndarray], residuals: list[np.ndarray], lags: int
 ) -> np.ndarray:
@@ -44,10 +54,7 @@ def theta_covariance_factor(
     # and outputs near 1e100, whose squares are still finite, give products beyond float64.
     sizes = np.maximum(np.max(np.abs(g), axis=0), np.finfo(float).tiny)
     g = g / sizes
-    meat = g.T @ g
-    for lag in range(1, lags + 1):
-        cross = g[lag:].T @ g[:-lag]
-        meat += cross + cross.T
+    meat = lag_window_meat(g, np.ones(lags))
     values, vectors = np.linalg.eigh(0.5 * (meat + meat.T))
     root = sizes[:, None] * vectors * np.sqrt(np.clip(values, 0.0, None))
     bread = scipy.linalg.block_diag(

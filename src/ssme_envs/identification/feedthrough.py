@@ -24,6 +24,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ssme_envs.identification.covariance import lag_window_meat
 from ssme_envs.identification.metrics import filter_prediction
 from ssme_envs.models.statespace import AlphaCanonicalModel
 
@@ -75,15 +76,12 @@ def feedthrough_estimate(model: AlphaCanonicalModel, u: np.ndarray, y: np.ndarra
     r_inv = np.linalg.inv(r_x)
     bread = r_inv @ r_inv.T  # (X'X)^-1 = R^-1 R^-T
     bandwidth = math.floor(4.0 * (rows / 100.0) ** (2.0 / 9.0))
+    bartlett = 1.0 - np.arange(1, bandwidth + 1) / (bandwidth + 1.0)
     current = slice(1, 1 + m)
     t = np.zeros((y.shape[1], m))
     coefficient = (beta[current] / norms[current, None]).T  # output spreads per input unit
     for i in range(y.shape[1]):
-        scores = xs * errors[:, [i]]
-        meat = scores.T @ scores
-        for lag in range(1, bandwidth + 1):
-            cross = scores[lag:].T @ scores[:-lag]
-            meat += (1.0 - lag / (bandwidth + 1.0)) * (cross + cross.T)
+        meat = lag_window_meat(xs * errors[:, [i]], bartlett)
         variance = np.diag(bread @ meat @ bread)[current]
         se = np.sqrt(np.maximum(variance, 0.0)) / norms[current]
         with np.errstate(divide="ignore", invalid="ignore"):

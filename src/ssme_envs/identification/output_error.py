@@ -55,6 +55,23 @@ WHITENESS_LEVEL = 0.01
 OUTSIDE = 1e3
 
 
+def _minimize(
+    residuals: Callable[[np.ndarray], np.ndarray], start: np.ndarray, evaluations_per_parameter: int,
+    **tolerances: float,
+) -> scipy.optimize.OptimizeResult:  # fmt: skip
+    """Least squares of ``residuals`` from ``start`` by scipy's trust region (trf, scaled by the
+    Jacobian's columns), at most ``evaluations_per_parameter`` simulations per parameter;
+    ``tolerances``: ftol, xtol, gtol (scipy's defaults where not given)."""
+    return scipy.optimize.least_squares(
+        residuals,
+        start,
+        method="trf",
+        x_scale="jac",
+        max_nfev=evaluations_per_parameter * start.size,
+        **tolerances,
+    )
+
+
 def _scaled_errors(
     model: AlphaCanonicalModel, u: np.ndarray, y: np.ndarray, free: np.ndarray | None = None,
     basis: np.ndarray | None = None,
@@ -107,14 +124,7 @@ def refine(
     start = model.parameter_vector()
     residuals = _scaled_errors(model, u, y)
     initial = residuals(start)
-    solution = scipy.optimize.least_squares(
-        residuals,
-        start,
-        method="trf",
-        x_scale="jac",
-        ftol=COST_TOLERANCE,
-        max_nfev=EVALUATIONS_PER_PARAMETER * start.size,
-    )
+    solution = _minimize(residuals, start, EVALUATIONS_PER_PARAMETER, ftol=COST_TOLERANCE)
     refined = model.with_parameters(solution.x)
     if not (refined.spectral_radius() < 1.0 and solution.cost < 0.5 * float(initial @ initial)):
         return model
@@ -177,16 +187,10 @@ def fit_output_error(
     basis = scipy.linalg.null_space(model.dc_gain()[:, binary].T)
     residuals = _scaled_errors(model, u, y, free, basis)
     start = np.concatenate([full[free], basis.T @ offsets])
-    solution = scipy.optimize.least_squares(
-        residuals,
-        start,
-        method="trf",
-        x_scale="jac",
-        ftol=ESTIMATE_TOLERANCE,
-        xtol=ESTIMATE_TOLERANCE,
-        gtol=ESTIMATE_TOLERANCE,
-        max_nfev=ESTIMATE_EVALUATIONS_PER_PARAMETER * start.size,
-    )
+    solution = _minimize(
+        residuals, start, ESTIMATE_EVALUATIONS_PER_PARAMETER, ftol=ESTIMATE_TOLERANCE,
+        xtol=ESTIMATE_TOLERANCE, gtol=ESTIMATE_TOLERANCE,
+    )  # fmt: skip
     size = int(free.sum())
     full[free] = solution.x[:size]
     estimate = model.with_parameters(full)
