@@ -22,7 +22,8 @@ from an operating point, one row per sample. The steps:
 
 3. **Order**: among the candidates the singular values of ``Z`` allow, the largest drop for a
    noise-free record, else the smallest BIC of the candidate models' one-step prediction errors
-   (which needs step 4 for each candidate; rule in :func:`dsr_e`).
+   (which needs step 4 for each candidate; rule in :func:`dsr_e`, scan in
+   :mod:`ssme_envs.identification.subspace_bic`).
 
 4. **Realization.** ``C`` is the first block row of ``O``, ``A`` the least-squares solution of
    the shift invariance ``O[p:] = O[:-p] A``. ``B``, ``D``, ``K`` and the state at the start
@@ -58,10 +59,10 @@ from ssme_envs.identification.innovations_model import (
     second_order_parameters,
     to_continuous,
 )
+from ssme_envs.identification.subspace_bic import bic_order, realize
 from ssme_envs.identification.subspace_checks import (
     check_input_directions,
     noise_fraction,
-    prediction_criterion,
     unstable,
 )
 from ssme_envs.identification.subspace_horizons import (
@@ -71,7 +72,6 @@ from ssme_envs.identification.subspace_horizons import (
     retry_horizons,
     samples_needed,
 )
-from ssme_envs.identification.subspace_regression import input_matrices
 from ssme_envs.models.linear import check_dt
 
 DEFAULT_MAX_ORDER = 10
@@ -167,47 +167,6 @@ def _largest_drop(singular_values: np.ndarray, candidates: list[int]) -> int:
     return candidates[int(np.argmax([logs[n - 1] - logs[n] for n in candidates]))]
 
 
-def _realize(
-    left: np.ndarray, singular_values: np.ndarray, order: int, u: np.ndarray, y: np.ndarray,
-    e: np.ndarray | None, past: int, dt: float,
-) -> InnovationsModel:  # fmt: skip
-    """The model of ``order`` states from the SVD of ``Z``: (A, C) by shift invariance, then B, D
-    and K by regression on the samples from ``past`` on (``e`` None: noise-free, K = 0)."""
-    obs = left[:, :order] * np.sqrt(singular_values[:order])
-    a, c = _shift_invariance(obs, y.shape[1])
-    b, d, k = input_matrices(a, c, u[past:], y[past:], e)
-    return InnovationsModel(a, b, c, d, k, dt)
-
-
-def _bic_order(
-    left: np.ndarray, singular_values: np.ndarray, candidates: list[int], u: np.ndarray, y: np.ndarray,
-    e: np.ndarray, past: int, dt: float,
-) -> tuple[int, InnovationsModel] | None:  # fmt: skip
-    """The candidate order whose model minimizes BIC of the one-step prediction error on the
-    record (rule in dsr_e); None when no candidate's predictor is stable."""
-    m, p = u.shape[1], y.shape[1]
-    count = y.shape[0] - past
-    best = None
-    for order in candidates:
-        try:
-            model = _realize(left, singular_values, order, u, y, e, past, dt)
-        except ValueError:  # e.g. a spurious unstable pole leaves B and D undetermined
-            continue
-        criterion = prediction_criterion(model, u, y, past)
-        if not math.isfinite(criterion):
-            continue
-        bic = count * criterion + math.log(count) * (order * (2 * p + m) + p * m)
-        if best is None or bic < best[0]:
-            best = (bic, order, model)
-    return None if best is None else best[1:]
-
-
-def _shift_invariance(obs: np.ndarray, p: int) -> tuple[np.ndarray, np.ndarray]:
-    """(A, C) from the extended observability matrix."""
-    a, *_ = np.linalg.lstsq(obs[:-p], obs[p:], rcond=None)
-    return a, obs[:p].copy()
-
-
 def _identify_once(
     u: np.ndarray,
     y: np.ndarray,
@@ -234,7 +193,7 @@ def _identify_once(
     noise = None if noise_free else e
     if order is None:
         candidates = _order_candidates(singular_values, min(max_order, most), noise_free)
-        chosen = None if noise_free else _bic_order(left, singular_values, candidates, u, y, e, past, dt)
+        chosen = None if noise_free else bic_order(left, singular_values, candidates, u, y, e, past, dt)
         if chosen is not None:
             return chosen[1], singular_values, chosen[0], noise_free
         order = _largest_drop(singular_values, candidates)
@@ -243,7 +202,7 @@ def _identify_once(
             f"order={order} needs future_horizon >= {math.ceil(order / p)} and past_horizon >= "
             f"{math.ceil((order + 1) / (u.shape[1] + p))} (got {future} and {past})"
         )
-    return _realize(left, singular_values, order, u, y, noise, past, dt), singular_values, order, noise_free
+    return realize(left, singular_values, order, u, y, noise, past, dt), singular_values, order, noise_free
 
 
 def dsr_e(
@@ -291,10 +250,12 @@ def dsr_e(
     one takes the candidate whose model minimizes BIC of its one-step prediction errors on the
     record, ``N log det(Sigma_n) + log(N) (n (2 p + m) + p m)`` over the ``N = T - J`` samples
     after the past horizon (candidates whose B and D cannot be fitted or whose predictor is
-    unstable are skipped; the largest drop decides if none is left). The largest drop alone
-    under-orders noisy records: the values beyond the order sit on a floor that falls only as
-    ``1 / sqrt(T)`` relative to ``s_1``, and a weak mode's drop can be smaller than a strong
-    one's. On random stable systems of order 2-6 with 5 % output noise (200 records,
+    unstable are skipped; the largest drop decides if none is left). The candidates are screened
+    by faster computations of the same BIC and those near the smallest are scored exactly, which
+    chooses as scoring all exactly would (:mod:`~ssme_envs.identification.subspace_bic`). The
+    largest drop alone under-orders noisy records: the values beyond the order sit on a floor
+    that falls only as ``1 / sqrt(T)`` relative to ``s_1``, and a weak mode's drop can be smaller
+    than a strong one's. On random stable systems of order 2-6 with 5 % output noise (200 records,
     ``experiments/results/subspace_order.md``) the largest drop found the order on 36 % of
     records and the 90th percentile of the model's simulation error was 12 % of the output's
     spread; BIC found it on 68 %, with 0.67 % (the true order's model: 0.64 %). ``order=`` overrides.

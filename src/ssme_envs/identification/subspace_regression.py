@@ -9,7 +9,7 @@ import scipy.signal
 from ssme_envs.models.linear import spectral_radius
 
 
-def _output_powers(a: np.ndarray, c: np.ndarray, count: int) -> np.ndarray:
+def output_powers(a: np.ndarray, c: np.ndarray, count: int) -> np.ndarray:
     """``C A^k`` for k = 0..count-1, shape (count, p, n), by doubling."""
     powers = c[None]
     a_pow = a
@@ -36,7 +36,7 @@ def input_matrices(
     drive = u if e is None else np.hstack([u, e])
     target = y if e is None else y - e
     n_drive = drive.shape[1]
-    powers = _output_powers(a, c, horizon)  # (T, p, n)
+    powers = output_powers(a, c, horizon)  # (T, p, n)
     conv = scipy.signal.fftconvolve(powers[:, :, :, None], drive[:, None, None, :], axes=0)[:horizon]
     responses = np.zeros((horizon, p, n, n_drive))
     responses[1:] = conv[:-1]  # state k sums inputs up to k-1
@@ -76,4 +76,4 @@ def input_matrices(
     return gains[:, :m], d, k
 
 
-__all__ = ["input_matrices"]
+__all__ = ["input_matrices", "output_powers"]
