@@ -82,6 +82,7 @@ CASES: dict[str, list[tuple[tuple[str, ...], str]]] = {
         (("--noise", "0"), "--noise"),
         (("--noise", "nan"), "--noise"),
     ],
+    "structure_walk": [(("--seeds", "0"), "--seeds"), (("--first", "-1"), "--first")],
     "subspace_order": [(("--seeds", "0"), "--seeds"), (("--seeds", "x"), "--seeds")],
     "speed_limits": [
         (("--rounds", "0"), "--rounds"),

@@ -48,7 +48,7 @@ from ssme_envs.identification.alpha_fit import _binary_amplitudes, _Fit, _fit, _
 from ssme_envs.identification.arguments import check_arguments, real_record
 from ssme_envs.identification.covariance import parameter_uncertainty
 from ssme_envs.identification.feedthrough import check_feedthrough
-from ssme_envs.identification.output_error import fit_output_error, held_out_criterion, refine_contenders
+from ssme_envs.identification.output_error import fit_output_error, held_out_criterion
 from ssme_envs.identification.records import check_magnitudes
 from ssme_envs.identification.structure import (
     DEFAULT_MAX_INDEX,
@@ -59,6 +59,7 @@ from ssme_envs.identification.structure import (
     explore,
 )
 from ssme_envs.identification.structure import estimate_indices as structure_search
+from ssme_envs.identification.structure_refined import refine_candidate, refine_contenders, walk_refined
 from ssme_envs.models.statespace import AlphaCanonicalModel, AlphaStructure
 
 # Share of the record the candidate structures are fitted on; the rest scores them.
@@ -268,6 +269,11 @@ def identify(
             explore(search, score)
             if simulation:
                 refine_contenders(search, {i: f.model for i, f in fits.items()}, u, y, split)
+
+                def refine_one(cand: Candidate) -> None:
+                    refine_candidate(cand, fits[cand.indices].model, u, y, split)
+
+                walk_refined(search, score, refine_one)
             kind = "simulation" if simulation else "one-step prediction"
             search.criterion = f"BIC of the {kind} error on the last {u.shape[0] - split} samples"
         fit = _fit(AlphaStructure.from_indices(search.indices), u, y, dt, method, asymmetric, names)

@@ -8,7 +8,7 @@ Two uses:
   observable mode is noisy, and a larger structure can then simulate better only because its
   extra parameters soak up that estimation error, not because the system needs them. Refining
   each close contender on the simulation error it is judged by takes that noise out of the
-  comparison.
+  comparison (:mod:`.structure_refined`).
 - :func:`fit_output_error`, ``identify(method="oe")``: the estimate itself and its covariance.
   Under white output noise it is consistent whatever the instrumental-variable passes did, and
   its intervals are those of the Gauss-Newton information (Ljung, System Identification, 2nd ed.,
@@ -25,16 +25,11 @@ import scipy.linalg
 import scipy.optimize
 
 from ssme_envs.identification.metrics import filter_prediction
-from ssme_envs.identification.structure import StructureSearch
 from ssme_envs.models.statespace import AlphaCanonicalModel, asymmetric_gain
 from ssme_envs.models.uncertainty import ParameterUncertainty, jacobian
 
 # Simulation errors below this fraction of an output's spread are round-off (exact fits).
 CRITERION_FLOOR = 1e-10
-# Candidates within this criterion of the best are refined by output error before the choice
-# (a BIC difference of 200 is far beyond what estimation noise alone moves), at most this many.
-REFINE_MARGIN = 200.0
-MAX_CONTENDERS = 4
 # Iteration cap of the refinement, in evaluations per free parameter (each evaluation is one
 # simulation of the record); the start is already consistent, so a few Gauss-Newton steps suffice.
 EVALUATIONS_PER_PARAMETER = 30
@@ -311,26 +306,3 @@ def held_out_criterion(
     floor = (CRITERION_FLOOR * np.std(y, axis=0)) ** 2
     score = float(n * np.sum(np.log(np.maximum(mse, floor))) + parameters * np.log(n))
     return score, tuple(np.sqrt(mse).tolist())
-
-
-def refine_contenders(
-    search: StructureSearch,
-    models: dict[tuple[int, ...], AlphaCanonicalModel],
-    u: np.ndarray,
-    y: np.ndarray,
-    split: int,
-) -> None:
-    """Rescore the candidates within ``REFINE_MARGIN`` of the best after refining each on the
-    simulation error of the estimation part (:func:`.output_error.refine`), and choose again.
-    Candidates already at the round-off floor have nothing to gain and are left as they are."""
-    ranked = search.ranked()
-    if not ranked:
-        return
-    floor = CRITERION_FLOOR * np.std(y, axis=0)  # the floor held_out_criterion applies
-    for cand in ranked[:MAX_CONTENDERS]:
-        if cand.criterion > ranked[0].criterion + REFINE_MARGIN or np.all(np.array(cand.rms_error) <= floor):
-            continue
-        refined = refine(models[cand.indices], u[:split], y[:split])
-        cand.criterion, cand.rms_error = held_out_criterion(refined, cand.parameters, u, y, split, True)
-        cand.note = "output-error refined"
-    search.indices = search.ranked()[0].indices

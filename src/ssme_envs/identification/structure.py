@@ -55,6 +55,8 @@ class Candidate:
     parameters: int = 0
     rms_error: tuple[float, ...] = ()
     note: str = ""
+    refined: bool = False  # its criterion is that of the output-error refined model
+    unrefined: tuple[float, tuple[float, ...]] | None = None  # (criterion, rms_error) before refining
 
 
 @dataclass
@@ -302,6 +304,18 @@ def explore(search: StructureSearch, score: Callable[[tuple[int, ...]], Candidat
         search.indices = ranked[0].indices
 
 
+def neighbours(indices: tuple[int, ...]) -> list[tuple[int, ...]]:
+    """The index sets one output's index up or down from ``indices``, within ``MAX_WALK_ORDER``."""
+    out = []
+    for i in range(len(indices)):
+        for step in (1, -1):
+            mu = list(indices)
+            mu[i] += step
+            if 1 <= mu[i] and sum(mu) <= MAX_WALK_ORDER:
+                out.append(tuple(mu))
+    return out
+
+
 def _walk_indices(
     scored: dict[tuple[int, ...], Candidate], score: Callable[[tuple[int, ...]], Candidate]
 ) -> None:
@@ -313,13 +327,7 @@ def _walk_indices(
         if not ok:
             return
         best = min(ok, key=lambda c: c.criterion)
-        moves = []
-        for i in range(len(best.indices)):
-            for step in (1, -1):
-                mu = list(best.indices)
-                mu[i] += step
-                if 1 <= mu[i] and sum(mu) <= MAX_WALK_ORDER and tuple(mu) not in scored:
-                    moves.append(tuple(mu))
+        moves = [mu for mu in neighbours(best.indices) if mu not in scored]
         for mu in moves:
             scored[mu] = score(mu)
         if not moves or min(scored[mu].criterion for mu in moves) >= best.criterion:
