@@ -50,6 +50,8 @@ CASES: dict[str, list[tuple[tuple[str, ...], str]]] = {
         (("--methods", "mle"), "--methods"),
         (("--noise", "nan"), "--noise"),
         (("--noise", "0"), "--noise must be a number above 0"),  # noise-free intervals cover nothing
+        (("--indices", "0,2"), "--indices"),
+        (("--indices", "2"), "--indices"),
     ],
     "import_time": [(("--rounds", "0"), "--rounds"), (("--rounds", "x"), "--rounds"), (BOGUS, "--bogus")],
     "learned_vs_classical": [
@@ -187,14 +189,15 @@ def test_every_script_refuses_arguments_it_does_not_take() -> None:
 
 def test_coverage_script_reports_seeds_without_a_model_to_count() -> None:
     """engine_uncertainty_coverage.py on data the identifier refuses (noise as large as the
-    outputs' spread) and on data where least squares misses the true indices: a row each, with
-    the count and no coverage, where the script raised a traceback."""
+    outputs' spread) and with a model whose indices are not the true ones (given as (3, 2): the
+    structure search no longer misses them on these records): a row each, with the count and no
+    coverage, where the script raised a traceback."""
     runs = [
         _run(
             "engine_uncertainty_coverage",
-            ("--noise", noise, "--seeds", "1", "--levels", "70", "--methods", how),
+            ("--noise", noise, "--seeds", "1", "--levels", "70", "--methods", how, *given),
         )
-        for noise, how in (("1.0", "iv"), ("0.3", "ls"))
+        for noise, how, given in (("1.0", "iv", ()), ("0.3", "ls", ("--indices", "3,2")))
     ]
     assert [r.returncode for r in runs] == [0, 0], [r.stderr[-500:] for r in runs]
     assert "| 70 | iv | 0/1 (1 refused) | - | - |" in runs[0].stdout.splitlines()
