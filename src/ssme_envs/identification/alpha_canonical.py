@@ -180,9 +180,10 @@ def identify(
         Sample time, s.
     indices : sequence of int, optional
         Observability indices, ``p`` positive integers. When omitted, the rank search
-        (:func:`estimate_indices`) proposes its index set and the sets one decision away, and the
-        one with the lowest BIC of its simulation error is kept (``result.search`` holds every
-        candidate and the margin).
+        (:func:`estimate_indices`) proposes its index set and the sets one decision away, a walk
+        over single indices goes on from the best, and the one with the lowest held-out BIC of its
+        simulation error is kept, close contenders compared after output-error refinement
+        (:mod:`.structure_refined`; ``result.search`` holds every candidate and the margin).
     method : {"iv", "ls", "oe"}
         "ls" is eq 27 as in the paper; "iv" adds two instrumental-variable passes, each kept only
         if it simulates the record better; "oe" starts from "iv" and minimizes the simulation
