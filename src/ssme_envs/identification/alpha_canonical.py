@@ -269,11 +269,11 @@ def identify(
 
             explore(search, score)
             if simulation:
-                refine_contenders(search, {i: f.model for i, f in fits.items()}, u, y, split)
 
                 def refine_one(cand: Candidate) -> None:
                     refine_candidate(cand, fits[cand.indices].model, u, y, split)
 
+                refine_contenders(search, refine_one)
                 walk_refined(search, score, refine_one)
             kind = "simulation" if simulation else "one-step prediction"
             search.criterion = f"BIC of the {kind} error on the last {u.shape[0] - split} samples"

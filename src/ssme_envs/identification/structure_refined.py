@@ -54,21 +54,15 @@ def refine_candidate(
     cand.refined = True
 
 
-def refine_contenders(
-    search: StructureSearch,
-    models: dict[tuple[int, ...], AlphaCanonicalModel],
-    u: np.ndarray,
-    y: np.ndarray,
-    split: int,
-) -> None:
+def refine_contenders(search: StructureSearch, refine_one: Callable[[Candidate], None]) -> None:
     """Rescore the candidates within ``REFINE_MARGIN`` of the best (at most ``MAX_CONTENDERS``)
-    after refining each on the simulation error of the estimation part, and choose again."""
+    by ``refine_one`` (:func:`refine_candidate` on the set's estimate), and choose again."""
     ranked = search.ranked()
     if not ranked:
         return
     for cand in ranked[:MAX_CONTENDERS]:
         if cand.criterion <= ranked[0].criterion + REFINE_MARGIN:
-            refine_candidate(cand, models[cand.indices], u, y, split)
+            refine_one(cand)
     search.indices = search.ranked()[0].indices
 
 

@@ -101,43 +101,42 @@ def bic_order(
     drive, record = Spectra(np.hstack([u[past:], e])), Spectra(np.hstack([u, y])[:-1])
     screened: dict[int, float] = {}  # screened BIC
     exact: dict[int, float] = {}  # BIC as the rule defines it
-    models: dict[int, InnovationsModel] = {}  # exact models, where realized
+    models: dict[int, InnovationsModel | None] = {}  # exact models, where realized (None: refused)
+
+    def exact_model(order: int) -> InnovationsModel | None:
+        if order not in models:
+            try:
+                models[order] = realize(left, singular_values, order, u, y, e, past, dt)
+            except ValueError:  # e.g. a spurious unstable pole leaves B and D undetermined
+                models[order] = None
+        return models[order]
+
     for order in candidates:
         a, c = observability_pair(left, singular_values, order, p)
         try:
             screened_bdk = screened_input_matrices(a, c, u[past:], target, drive)
-            if screened_bdk is None:  # the screen does not vouch for this regression: realize exactly
-                models[order] = realize(left, singular_values, order, u, y, e, past, dt)
-        except ValueError:  # A's powers overflow, or a spurious unstable pole leaves B and D undetermined
+        except ValueError:  # A's powers overflow: input_matrices refuses this order for certain
             continue
-        if screened_bdk is None:
-            model = models[order]
+        if screened_bdk is None:  # the screen does not vouch for this regression: realize exactly
+            if (model := exact_model(order)) is None:
+                continue
             matrices = (model.A, model.B, model.C, model.D, model.K)
         else:
-            b, d, k = screened_bdk
-            matrices = (a, b, c, d, k)
+            matrices = (a, screened_bdk[0], c, screened_bdk[1], screened_bdk[2])
         criterion = screened_criterion(matrices, u, y, past, record)
         if criterion is not None:
             screened[order] = _bic(count, criterion, order, m, p)
             continue
-        if order not in models:  # nor for these prediction errors: score exactly
-            try:
-                models[order] = realize(left, singular_values, order, u, y, e, past, dt)
-            except ValueError:
-                continue
-        if (bic := _exact_bic(models[order], u, y, past)) is not None:
+        # nor for these prediction errors: score exactly
+        if (model := exact_model(order)) is not None and (bic := _exact_bic(model, u, y, past)) is not None:
             exact[order] = bic
     if not screened and not exact:
         return None
     scores = {**screened, **exact}
     bound = min(scores.values()) + TIE_MARGIN
     contenders = [order for order in candidates if scores.get(order, math.inf) <= bound]
-    for order in contenders:
-        if order not in models:
-            try:
-                models[order] = realize(left, singular_values, order, u, y, e, past, dt)
-            except ValueError:
-                return _exact_scan(left, singular_values, candidates, u, y, e, past, dt)
+    if any(exact_model(order) is None for order in contenders):
+        return _exact_scan(left, singular_values, candidates, u, y, e, past, dt)
     if len(contenders) == 1:
         # alone by more than the screen's error: its exact BIC is not needed, only that it counts:
         # a stable predictor (the screen's margin leaves it that; prediction_criterion's other
