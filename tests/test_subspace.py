@@ -255,6 +255,13 @@ def test_bad_records(short_record, change, message):
         dsr_e(u, y, dt=0.04)
 
 
+@pytest.mark.parametrize("samples", [0, 1])
+def test_an_empty_or_one_sample_record_is_refused_by_name(samples):
+    # an empty record used to fail in numpy's reduction ("zero-size array to reduction operation")
+    with pytest.raises(ValueError, match=rf"^the record has {samples} samples: a record needs at least 2"):
+        dsr_e(np.zeros((samples, 1)), np.zeros((samples, 1)), dt=0.04)
+
+
 @pytest.mark.parametrize(
     ("change", "message"),
     [

@@ -105,6 +105,8 @@ def check_record(
         raise ValueError("inputs and outputs must be arrays of shape (samples, channels)")
     if u.shape[0] != y.shape[0]:
         raise ValueError(f"inputs have {u.shape[0]} samples but outputs have {y.shape[0]}")
+    if u.shape[0] < 2:
+        raise ValueError(f"the record has {u.shape[0]} samples: a record needs at least 2 to identify from")
     in_names = _names(input_names, u.shape[1], "u")
     out_names = _names(output_names, y.shape[1], "y")
     check_magnitudes(u, in_names, "input")
