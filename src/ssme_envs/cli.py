@@ -101,7 +101,11 @@ def build_parser() -> argparse.ArgumentParser:
     engine.add_argument("--validate", type=Path, help="a second CSV record to validate on")
     engine.add_argument("--indices", help="observability indices, e.g. 2,2 (default: estimated)")
     engine.add_argument(
-        "--max-index", type=integer, default=6, help="largest index searched (default: %(default)s)"
+        "--max-index",
+        type=integer,
+        default=6,
+        help="largest index of the rank search; the walk over neighbouring sets may go past it, "
+        "to 12 states in all (default: %(default)s)",
     )
     engine.add_argument(
         "--rank-tol", type=number, default=0.1, help="rank-search threshold (default: %(default)s)"

@@ -195,7 +195,9 @@ def identify(
     asymmetric : bool
         Estimate the lambda gains of eq 36 (otherwise lambda = 1).
     max_index, rank_tol : int >= 1, float in (0, 1)
-        See :func:`estimate_indices`.
+        See :func:`estimate_indices`. ``max_index`` bounds the rank search; the walk over
+        neighbouring sets may go past it, to at most ``MAX_WALK_ORDER`` (12) states in all,
+        where the held-out scores say so (``indices=`` fixes the structure).
     input_names, output_names : sequences of str, optional
         ``m`` and ``p`` distinct names, carried into the model and used in error messages.
     uncertainty : bool
