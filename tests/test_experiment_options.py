@@ -79,6 +79,7 @@ CASES: dict[str, list[tuple[tuple[str, ...], str]]] = {
         (("--episodes", "1000000000000000"), "--episodes"),
     ],
     "robustness_study": [(("--plants", "0"), "--plants")],
+    "short_record_structure": [(("--seeds", "0"), "--seeds"), (("--methods", "mle"), "--methods")],
     "slow_mode_coverage": [
         (("--seeds", "0"), "--seeds"),
         (("--noise", "0"), "--noise"),
