@@ -446,3 +446,24 @@ def test_read_text_bounds_what_it_reads(tmp_path):
     assert read_text(path, max_bytes=11) == "t,a\n0,1\n"
     with pytest.raises(ValueError, match="larger than"):
         read_text(path, max_bytes=10)
+
+
+# --- an identified model whose simulation of its own record overflows -------------------------------
+
+
+@pytest.mark.parametrize("radius", [1.5, 2.0, 10.0])
+def test_an_identified_model_whose_simulation_overflows_is_refused_by_name(radius):
+    """identify_record's figures on its own record: a model unstable enough to overflow over the
+    record gives a ValueError naming the figure, the output and the spectral radius, never an inf
+    in model.fit (it used to be written there, and the CLI then failed on the JSON)."""
+    from ssme_envs.identification.metrics import finite_validation
+
+    model = identified_model(100)
+    model = dataclasses.replace(model, A=model.A * (radius / model.spectral_radius()))
+    data = _good()
+    u, y = np.tile(data[:, :2], (40, 1)), np.tile(data[:, 2:], (40, 1))  # 2400 samples: radius^2400 overflows
+    with pytest.raises(
+        ValueError,
+        match=rf"^the record: the model's see for output '\w+' is (inf|nan) .*radius {radius:.4g}\)$",
+    ):
+        finite_validation(model, u, y, "the record")

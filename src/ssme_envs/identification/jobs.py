@@ -8,7 +8,6 @@ records first (ValueErrors naming the file), then writes through
 from __future__ import annotations
 
 import csv
-import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -49,21 +48,9 @@ def _check_record(path: Path, record: Any) -> None:
 def _scores(model: Any, record: Any, path: Path) -> dict:
     """SEE and fit of ``model`` on ``record``; ValueError when a figure comes out NaN or inf (the
     model's prediction overflowed)."""
-    import numpy as np
+    from ssme_envs.identification.metrics import finite_validation
 
-    from ssme_envs.identification.metrics import validate
-
-    with np.errstate(all="ignore"):  # an overflow is refused just below, without warnings
-        scores = validate(model, record.u, record.y)
-    for predictor, figures in scores.items():
-        for metric, values in figures.items():
-            for name, value in zip(model.output_names, values, strict=True):
-                if not math.isfinite(value):
-                    raise ValueError(
-                        f"{path}: the {predictor}'s {metric} for output '{name}' is {value} "
-                        "(its prediction overflows on this record)"
-                    )
-    return scores
+    return finite_validation(model, record.u, record.y, str(path))
 
 
 @dataclass

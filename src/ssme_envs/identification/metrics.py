@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ssme_envs.models.engine import TruthConfig, simulate
@@ -52,3 +54,24 @@ def validate(model: AlphaCanonicalModel, u: np.ndarray, y: np.ndarray) -> dict[s
     for name, pred in (("filter", filter_prediction(model, u, y)), ("model", model_prediction(model, u))):
         out[name] = {"see": see(y, pred).tolist(), "fit_percent": fit_percent(y, pred).tolist()}
     return out
+
+
+def finite_validation(
+    model: AlphaCanonicalModel, u: np.ndarray, y: np.ndarray, where: str
+) -> dict[str, dict[str, list[float]]]:
+    """:func:`validate`, with a ValueError naming ``where`` (the record), the predictor, the figure
+    and the output where a figure comes out NaN or inf (a prediction that overflows: an unstable
+    model, or inputs near the float range's end), and no floating-point warnings."""
+    with np.errstate(all="ignore"):  # an overflow is refused just below
+        scores = validate(model, u, y)
+    for predictor, figures in scores.items():
+        for metric, values in figures.items():
+            for name, value in zip(model.output_names, values, strict=True):
+                if not math.isfinite(value):
+                    radius = model.spectral_radius()
+                    why = f": the model is unstable, spectral radius {radius:.4g}" if radius >= 1.0 else ""
+                    raise ValueError(
+                        f"{where}: the {predictor}'s {metric} for output '{name}' is {value} "
+                        f"(its prediction overflows on this record{why})"
+                    )
+    return scores

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from ssme_envs.identification.alpha_canonical import Identification, identify
-from ssme_envs.identification.metrics import validate
+from ssme_envs.identification.metrics import finite_validation, validate
 from ssme_envs.identification.records import read_columns, write_columns
 from ssme_envs.models.engine import ENGINE_DT, POWER_LEVELS, TruthConfig, published_model, simulate
 from ssme_envs.models.statespace import ENGINE_INPUTS, ENGINE_OUTPUTS, AlphaCanonicalModel
@@ -65,7 +65,8 @@ def identify_record(record: EngineRecord, **options) -> Identification:
     """Identify an alpha-canonical model from a record; options go to :func:`identify`.
 
     The returned model's ``fit`` holds SEE and NRMSE fit of the filter and of the model on
-    the identification record itself.
+    the identification record itself; ValueError where one comes out NaN or inf (a model whose
+    simulation of the record overflows: :func:`~ssme_envs.identification.metrics.finite_validation`).
     """
     result = identify(
         record.u,
@@ -75,7 +76,9 @@ def identify_record(record: EngineRecord, **options) -> Identification:
         output_names=record.output_names,
         **options,
     )
-    result.model.fit["identification_record"] = validate(result.model, record.u, record.y)
+    result.model.fit["identification_record"] = finite_validation(
+        result.model, record.u, record.y, "the identification record"
+    )
     return result
 
 
