@@ -55,7 +55,7 @@ def same_fit(first, second) -> bool:
 
 def pass_data(u: np.ndarray, y: np.ndarray, past: int = 12, future: int = 5):
     """Innovations, the SVD of Z and the candidate orders of one pass, as _identify_once has them."""
-    e = subspace._innovations(u, y, past)
+    e = subspace.arx_innovations(u, y, past)
     left, singular_values, _ = np.linalg.svd(subspace._projected_future(u, y, e, past, future, False))
     candidates = subspace._order_candidates(singular_values, min(10, future * y.shape[1]), False)
     return e, left, singular_values, candidates

@@ -60,6 +60,7 @@ from ssme_envs.identification.structure import (
 )
 from ssme_envs.identification.structure import estimate_indices as structure_search
 from ssme_envs.identification.structure_refined import refine_candidate, refine_contenders, walk_refined
+from ssme_envs.identification.subspace_checks import arx_innovations, check_input_directions, noise_fraction
 from ssme_envs.models.statespace import AlphaCanonicalModel, AlphaStructure
 
 # Share of the record the candidate structures are fitted on; the rest scores them.
@@ -213,9 +214,11 @@ def identify(
         Before any work, for an argument of the wrong kind or out of range, naming it
         (:func:`~ssme_envs.identification.arguments.check_arguments`; its TypeErrors are
         ValueErrors too), or a record too short for the indices or the structure search; then
-        for a record :func:`check_record` refuses, one the fit cannot determine, or one whose
-        outputs respond to the inputs within the sample (direct feedthrough, which the strictly
-        proper form cannot hold: :mod:`.feedthrough`).
+        for a record :func:`check_record` refuses, one whose inputs are so nearly collinear that
+        the gain along some input direction is not determined at its noise
+        (:func:`~ssme_envs.identification.subspace_checks.check_input_directions`, as in DSR_e),
+        one the fit cannot determine, or one whose outputs respond to the inputs within the sample
+        (direct feedthrough, which the strictly proper form cannot hold: :mod:`.feedthrough`).
     """
     args = check_arguments(
         u,
@@ -233,6 +236,9 @@ def identify(
     dt, indices, in_names, out_names = args.dt, args.indices, args.input_names, args.output_names
     u, y = check_record(args.u, args.y, in_names, out_names)
     names = (in_names, out_names)
+    past = max(1, min(2 * max(indices or (max_index,)), u.shape[0] // (4 * (u.shape[1] + y.shape[1]))))
+    noise = lambda: noise_fraction(arx_innovations(u, y, past), y[past:])  # noqa: E731
+    check_input_directions(u, noise, _names(in_names, u.shape[1], "u"))
 
     search = None
     if indices is None:

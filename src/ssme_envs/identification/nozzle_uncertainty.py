@@ -54,7 +54,8 @@ import numpy as np
 import scipy.signal
 
 from ssme_envs.identification.channel_scales import equilibrated
-from ssme_envs.identification.subspace import SubspaceResult, _innovations, dsr_e, second_order_parameters
+from ssme_envs.identification.subspace import SubspaceResult, dsr_e, second_order_parameters
+from ssme_envs.identification.subspace_checks import arx_innovations
 from ssme_envs.models.statespace import check_dt
 from ssme_envs.models.uncertainty import ParameterUncertainty
 
@@ -188,7 +189,7 @@ def _record_innovations(u: np.ndarray, y: np.ndarray, past: int) -> np.ndarray:
     balanced record is used as it is (its residuals bit for bit).
     """
     u_scaled, y_scaled, scales = equilibrated(u[:, None], y[:, None])
-    residual = _innovations(u_scaled, y_scaled, past)[:, 0]
+    residual = arx_innovations(u_scaled, y_scaled, past)[:, 0]
     return residual if scales is None else np.ldexp(residual, scales[1][0])
 
 

@@ -48,7 +48,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import scipy.linalg
 
 from ssme_envs.identification.alpha_canonical import check_record
 from ssme_envs.identification.channel_scales import equilibrated, restore_units
@@ -61,6 +60,7 @@ from ssme_envs.identification.innovations_model import (
 )
 from ssme_envs.identification.subspace_bic import bic_order, realize
 from ssme_envs.identification.subspace_checks import (
+    arx_innovations,
     check_input_directions,
     noise_fraction,
     unstable,
@@ -94,18 +94,6 @@ def _positive_int(value: int | None, name: str) -> int | None:
 def _block_hankel(x: np.ndarray, first: int, rows: int, cols: int) -> np.ndarray:
     """Block row ``i`` holds ``x[first + i + c]`` in column ``c``; shape (rows * channels, cols)."""
     return np.vstack([x[first + i : first + i + cols].T for i in range(rows)])
-
-
-def _innovations(u: np.ndarray, y: np.ndarray, past: int) -> np.ndarray:
-    """Residual of ``y(k)`` projected on ``u(k)`` and ``u, y`` at lags 1..past, k = past..T-1."""
-    horizon = u.shape[0]
-    lagged = [u[past:]]
-    for lag in range(1, past + 1):
-        lagged += [u[past - lag : horizon - lag], y[past - lag : horizon - lag]]
-    phi = np.hstack(lagged)
-    # Rank-revealing QR least squares (gelsy): a noise-free record makes the output lags dependent.
-    theta, *_ = scipy.linalg.lstsq(phi, y[past:], lapack_driver="gelsy", check_finite=False)
-    return y[past:] - phi @ theta
 
 
 def _projected_future(
@@ -178,7 +166,7 @@ def _identify_once(
 ) -> tuple[InnovationsModel, np.ndarray, int, bool]:
     """One DSR_e pass at fixed horizons: (model, singular values, order, noise-free)."""
     p = y.shape[1]
-    e = _innovations(u, y, past)
+    e = arx_innovations(u, y, past)
     spread = np.linalg.norm(y - y.mean(axis=0))
     noise_free = bool(np.linalg.norm(e) <= NOISE_FREE_TOL * spread)
     z = _projected_future(u, y, e, past, future, noise_free)
@@ -324,7 +312,7 @@ def dsr_e(
         )
 
     u, y, scales = equilibrated(u, y)
-    check_input_directions(u, lambda: noise_fraction(_innovations(u, y, past), y[past:]))
+    check_input_directions(u, lambda: noise_fraction(arx_innovations(u, y, past), y[past:]))
 
     def one_pass(past: int, future: int) -> tuple[InnovationsModel, np.ndarray, int, bool]:
         return _identify_once(u, y, dt, past, future, order, max_order)

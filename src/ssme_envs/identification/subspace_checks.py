@@ -1,6 +1,7 @@
 """Checks around DSR_e (:mod:`ssme_envs.identification.subspace`): whether a record's inputs excite
-every input direction well enough for the model's gains to be determined, and the one-step
-prediction criterion by which a retry with other horizons chooses among its fits."""
+every input direction well enough for the model's gains to be determined (also run by the
+alpha-canonical ``identify``), and the one-step prediction criterion by which a retry with other
+horizons chooses among its fits."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ import math
 from collections.abc import Callable, Sequence
 
 import numpy as np
+import scipy.linalg
 
 from ssme_envs.identification.innovations_model import InnovationsModel
 from ssme_envs.models.linear import spectral_radius
@@ -42,21 +44,24 @@ def input_directions(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return s / s[0], vt
 
 
-def _direction(v: np.ndarray) -> str:
+def _direction(v: np.ndarray, names: Sequence[str]) -> str:
     """``0.707 u0 - 0.707 u1``, the larger of the signs first."""
     v = v if v[np.argmax(np.abs(v))] > 0 else -v
-    terms = [(c, f"u{i}") for i, c in enumerate(v) if abs(c) >= 0.01]
+    terms = [(c, names[i]) for i, c in enumerate(v) if abs(c) >= 0.01]
     text = " ".join(f"{'-' if c < 0 else '+'} {abs(c):.3g} {name}" for c, name in terms)
     return text[2:] if text.startswith("+ ") else "-" + text[2:]
 
 
-def check_input_directions(u: np.ndarray, measure_noise: Callable[[], float]) -> None:
+def check_input_directions(
+    u: np.ndarray, measure_noise: Callable[[], float], names: Sequence[str] | None = None
+) -> None:
     """Raise ValueError when the inputs are so nearly collinear that the gain along some input
     direction is not determined by the record (``COLLINEAR_GAIN_ERROR``).
 
     ``measure_noise`` gives the outputs' noise as a fraction of their spread (at most 1); it is
     called only when some direction is excited so weakly that even noise as large as the outputs'
     spread could leave its gain undetermined, so a well-conditioned record costs one SVD.
+    ``names``: the inputs' names in the message (default u0, u1, ...).
     """
     n_samples, m = u.shape
     if m < 2:
@@ -70,7 +75,8 @@ def check_input_directions(u: np.ndarray, measure_noise: Callable[[], float]) ->
     weak = np.flatnonzero(uncertainty > COLLINEAR_GAIN_ERROR)
     if weak.size == 0:
         return
-    names = ", ".join(f"u{i}" for i in range(m))
+    names = [f"u{i}" for i in range(m)] if names is None else list(names)
+    listed = ", ".join(names)
     noise = f"with output noise at {100 * rho:.3g} % of the outputs' spread and {n_samples} samples"
     remedy = (
         "Excite the inputs independently (e.g. uncorrelated PRBS), use a longer or less noisy record, "
@@ -79,21 +85,33 @@ def check_input_directions(u: np.ndarray, measure_noise: Callable[[], float]) ->
     if weak.size == 1:
         i = weak[0]
         raise ValueError(
-            f"the inputs {names} are nearly collinear: the input direction {_direction(vt[i])} (each "
+            f"the inputs {listed} are nearly collinear: the input direction {_direction(vt[i], names)} (each "
             f"input divided by its RMS) is excited {1 / ratios[i]:.3g} times less than the strongest "
             f"one; {noise}, the model's gain along it would be uncertain by about {uncertainty[i]:.3g} "
             f"times the system's gain, so it is not determined by this record. {remedy}"
         )
     directions = ", ".join(
-        f"{_direction(vt[i])} (excited {1 / ratios[i]:.3g} times less than the strongest one, gain "
+        f"{_direction(vt[i], names)} (excited {1 / ratios[i]:.3g} times less than the strongest one, gain "
         f"uncertain by about {uncertainty[i]:.3g} times the system's gain)"
         for i in weak
     )
     raise ValueError(
-        f"the inputs {names} are nearly collinear: along the input directions {directions} (each "
+        f"the inputs {listed} are nearly collinear: along the input directions {directions} (each "
         f"input divided by its RMS), {noise}, the model's gains are not determined by this record. "
         f"{remedy}"
     )
+
+
+def arx_innovations(u: np.ndarray, y: np.ndarray, past: int) -> np.ndarray:
+    """Residual of ``y(k)`` projected on ``u(k)`` and ``u, y`` at lags 1..past, k = past..T-1."""
+    horizon = u.shape[0]
+    lagged = [u[past:]]
+    for lag in range(1, past + 1):
+        lagged += [u[past - lag : horizon - lag], y[past - lag : horizon - lag]]
+    phi = np.hstack(lagged)
+    # Rank-revealing QR least squares (gelsy): a noise-free record makes the output lags dependent.
+    theta, *_ = scipy.linalg.lstsq(phi, y[past:], lapack_driver="gelsy", check_finite=False)
+    return y[past:] - phi @ theta
 
 
 def noise_fraction(e: np.ndarray, y: np.ndarray) -> float:
@@ -135,6 +153,7 @@ def most_predictive(
 
 __all__ = [
     "COLLINEAR_GAIN_ERROR",
+    "arx_innovations",
     "check_input_directions",
     "input_directions",
     "most_predictive",
