@@ -12,6 +12,7 @@ by their simulation of a fresh noise-free record, computed here by ``scipy.signa
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -90,3 +91,48 @@ def test_the_order_minimizes_the_documented_bic(seed):
         _, logdet = np.linalg.slogdet(errors.T @ errors / count)
         scores[order] = count * logdet + math.log(count) * (order * (2 * p + m) + p * m)
     assert result.order == min(scores, key=scores.get)
+
+
+def _response_error(model, a, b, c) -> float:
+    """Largest error of the model's frequency response at 16 frequencies, relative to the system's
+    peak (responses computed here from the matrices)."""
+    errors, peak = [], 0.0
+    for z in np.exp(1j * np.linspace(0.01, np.pi, 16)):
+        want = c @ np.linalg.solve(z * np.eye(a.shape[0]) - a, b)
+        got = model.C @ np.linalg.solve(z * np.eye(model.A.shape[0]) - model.A, model.B) + model.D
+        errors.append(np.max(np.abs(got - want)))
+        peak = max(peak, float(np.max(np.abs(want))))
+    return max(errors) / peak
+
+
+@settings(deadline=None, max_examples=8)
+@given(seed=st.integers(0, 2**32 - 1), order=st.integers(11, 14), p=st.integers(1, 2))
+def test_a_noise_free_record_beyond_the_candidate_orders_is_refused_not_under_ordered(seed, order, p):
+    """A noise-free record of 11-14 states (two inputs): the default candidates reach 10. The
+    largest drop among them used to give a smaller model without a word (14 states, two outputs:
+    order 5, fit 99.1 %). Now either the model holds the system's frequency response (modes the
+    record shows below 1e-7 of the largest singular value may be left out) or the record is
+    refused, naming max_order and the remedy; with max_order and the future horizon raised it
+    holds the response (scipy.signal.dlsim's record, responses computed here)."""
+    rng = np.random.default_rng(seed)
+    a, b, c = random_system(order, 2, p, rng)
+    u = rng.standard_normal((2000, 2))
+    y = dlsim(a, b, c, u)
+    try:
+        default = dsr_e(u, y, 1.0)
+    except ValueError as exc:
+        assert re.search(r"noise-free, but its singular values .* max_order=10 .* raise them", str(exc))
+    else:
+        assert _response_error(default.model, a, b, c) < 1e-4
+    raised = dsr_e(u, y, 1.0, max_order=16, future_horizon=-(-16 // p))
+    assert _response_error(raised.model, a, b, c) < 1e-4
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_audit_record_of_14_states_is_refused_by_default(seed):
+    """Two outputs, 14 states (the audit's case): refused by default at every seed here."""
+    rng = np.random.default_rng(seed)
+    a, b, c = random_system(14, 2, 2, rng)
+    u = rng.standard_normal((2000, 2))
+    with pytest.raises(ValueError, match=r"noise-free, but its singular values do not fall to round-off"):
+        dsr_e(u, dlsim(a, b, c, u), 1.0)
