@@ -349,3 +349,19 @@ def test_the_input_scale_only_scales_the_input_gains(exponent):
     size = np.abs(theirs).max()  # D is zero up to the noise: compared on the transfer's scale
     np.testing.assert_allclose(ours, theirs, rtol=0, atol=1e-3 * size)
     np.testing.assert_allclose(scale * scaled.D, base.D, rtol=0, atol=1e-3 * size)
+
+
+@pytest.mark.parametrize("samples", [200, 233])
+def test_a_record_too_short_for_the_given_order_names_the_length_needed(samples):
+    """Order 2 given, one input and output, horizons automatic: the future horizon is 10 (from
+    max_order), and under 234 samples the capped past horizon (1) cannot hold 2 states: the error
+    names the length (it used to name horizons the CLI does not set). The 234 comes from the
+    horizon rules' constants worked by hand: 10 + 6 * 11 * 3 + 2 * (1 + 6 * 2)."""
+    a, b, c = 0.5 * A3[:2, :2], B3[:2, :1], C3[:1, :2]
+    rng = np.random.default_rng(0)
+    u = rng.standard_normal((samples, 1))
+    y = dlsim(a, b, c, u) + 0.01 * rng.standard_normal((samples, 1))
+    with pytest.raises(ValueError, match=rf"^the record has {samples} samples; 2 states .* from 234 samples"):
+        dsr_e(u, y, 0.008, order=2)
+    longer = rng.standard_normal((234, 1))
+    assert dsr_e(longer, dlsim(a, b, c, longer), 0.008, order=2).order == 2

@@ -66,6 +66,7 @@ from ssme_envs.identification.subspace_checks import (
     unstable,
 )
 from ssme_envs.identification.subspace_horizons import (
+    check_past_holds_order,
     default_future,
     default_past,
     refined_fit,
@@ -318,6 +319,8 @@ def dsr_e(
 
     future = future_horizon if future_horizon is not None else default_future(max_order, p)
     past = past_horizon if past_horizon is not None else default_past(n_samples, m, p, future)
+    if order is not None and past_horizon is None:
+        check_past_holds_order(n_samples, m, p, past, future, order)
     needed = samples_needed(m, p, past, future)
     if n_samples < needed:
         raise ValueError(

@@ -62,6 +62,21 @@ def past_horizon_cap(n_samples: int, m: int, p: int, future: int) -> int:
     return (n_samples - fixed) // (1 + AUTO_COLUMNS_PER_ROW * (m + p))
 
 
+def check_past_holds_order(n_samples: int, m: int, p: int, past: int, future: int, order: int) -> None:
+    """ValueError naming the record length needed when the automatic past horizon, capped by a
+    short record, has too few rows for ``order`` states (a pass would fail on the horizons, which
+    a command-line user does not set)."""
+    need = math.ceil((order + 1) / (m + p))
+    if past >= need:
+        return
+    fixed = future + AUTO_COLUMNS_PER_ROW * (future + 1) * (m + 2 * p)
+    samples = fixed + need * (1 + AUTO_COLUMNS_PER_ROW * (m + p))
+    raise ValueError(
+        f"the record has {n_samples} samples; {order} states need a past horizon of {need}, which the "
+        f"automatic horizons (future horizon {future}) reach from {samples} samples on: use a longer record"
+    )
+
+
 def default_future(max_order: int, p: int) -> int:
     """The automatic future horizon ``L``: orders up to ``max_order`` fit in ``L p``."""
     return max(math.ceil(max_order / p), 2)
