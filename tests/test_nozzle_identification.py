@@ -585,3 +585,26 @@ def test_the_strong_nozzle_design_model_is_what_its_pipeline_produces(tmp_path):
         (resources.files("ssme_envs") / "models" / "data" / IDENTIFIED_FILES["strong"]).read_text()
     )
     _assert_same_json(made, packaged)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("scale", [1e-300, 1e140])
+def test_cli_identifies_a_record_in_extreme_torque_units_quietly(tmp_path, capsys, strong, scale):
+    """The strong joint's bench record with the torque in units of 1/scale N m: exit 0, nothing on
+    stderr, the frequency-response figure written (it went through scipy's transfer-function
+    coefficients, which overflowed at 1e-300, a LinAlgError, and gave BadCoefficients and divide
+    warnings at 1e140), and J, b, k in the new units: the unscaled fit's times scale, to 1e-6."""
+    _, record, ident = strong
+    data = tmp_path / "scaled.csv"
+    write_nozzle_record(data, NozzleRecord(record.tau * scale, record.beta, record.dt, "tau", "beta"))
+    out = tmp_path / "out"
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        code = main(["identify", "nozzle", "--data", str(data), "--out", str(out)])
+    captured = capsys.readouterr()
+    assert code == 0 and captured.err == "", captured.err
+    assert not caught, [str(w.message) for w in caught]
+    assert (out / "frequency_response.png").stat().st_size > 10_000
+    linear = NozzleModel.load(out / "model.json").linear
+    for name in ("J", "b", "k"):
+        assert linear[name] == pytest.approx(ident.model.linear[name] * scale, rel=1e-6), name

@@ -134,7 +134,7 @@ def identify_nozzle(args: argparse.Namespace) -> int:
             progress=print,
         )
     lin = run.identified.model.linear
-    print(f"linear: J {lin['J']:.2f} kg m^2, b {lin['b']:.1f} N m s/rad, k {lin['k']:.4g} N m/rad")
+    print(f"linear: J {lin['J']:.4g} kg m^2, b {lin['b']:.4g} N m s/rad, k {lin['k']:.4g} N m/rad")
     print(f"Bouc-Wen: {run.identified.bouc_wen.reason}")
     print(f"done in {run.seconds:.1f} s; wrote {args.out / 'model.json'} and {run.report}")
     return 0

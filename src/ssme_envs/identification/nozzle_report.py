@@ -30,11 +30,15 @@ def plot_frequency_response(path: Path, ident: NozzleIdentification) -> None:
     ac, bc, cc, dc = to_continuous(ident.subspace.model)
     w = np.logspace(0, np.log10(np.pi / ident.model.dt), 400)
     fig, (mag_ax, ph_ax) = plt.subplots(2, 1, figsize=(7, 5), sharex=True)
-    for label, system, style in (
-        ("identified (DSR_e)", scipy.signal.StateSpace(ac, bc, cc, dc), "-"),
-        ("paper eq 5", scipy.signal.TransferFunction(*PAPER_TF), "--"),
+    # from the state space directly: scipy's bode goes through transfer-function coefficients,
+    # which overflow for a record in extreme units (torque in units of 1e-300: gain 1e300)
+    identified = np.array([(cc @ np.linalg.solve(1j * wk * np.eye(len(ac)) - ac, bc) + dc)[0, 0] for wk in w])
+    for label, response, style in (
+        ("identified (DSR_e)", identified, "-"),
+        ("paper eq 5", scipy.signal.freqs(*PAPER_TF, worN=w)[1], "--"),
     ):
-        _, mag, phase = scipy.signal.bode(system, w)
+        mag = 20.0 * np.log10(np.abs(response))
+        phase = np.degrees(np.unwrap(np.angle(response)))
         mag_ax.semilogx(w / (2 * np.pi), mag, style, label=label)
         ph_ax.semilogx(w / (2 * np.pi), phase, style, label=label)
     mag_ax.set_ylabel("magnitude (dB, rad/(N m))")
