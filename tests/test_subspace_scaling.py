@@ -187,3 +187,20 @@ def test_a_channel_in_tiny_units_is_data_not_a_constant(seed, k, channel):
     result = dsr_e(u * u_scale, y * y_scale, 1.0)
     assert pole_error(system[4], result.model.poles()) < 1e-9
     assert response_error(result.model, system, u_scale / u_rms, y_scale / y_rms) < 1e-9
+
+
+@settings(deadline=None, max_examples=30)
+@given(seed=SEEDS, m=st.integers(1, 2), p=st.integers(1, 2), k=st.floats(-150.0, 150.0))
+def test_a_record_of_any_size_identifies_as_at_unit_size(seed, m, p, k):
+    """Every channel times the same 10**k, k in [-150, 150] (within the range whose squares stay
+    finite, so accepted): the channels are balanced, and such a record used to be used unscaled,
+    which beyond about 1e+-100 lost B and D's regression to round-off thresholds relative to one
+    ("the inputs do not determine B and D"). Now its poles and response are as at unit size
+    (noise 1e-6, order given; tolerances as above)."""
+    system, u, y, u_rms, y_rms = unit_record(seed, m, p, noise=1e-6)
+    scale = 10.0**k
+    poles = system[4]
+    result = dsr_e(u * scale, y * scale, 1.0, order=poles.size)
+    assert pole_error(poles, result.model.poles()) < 1e-4
+    ones_u, ones_y = np.full(m, scale), np.full(p, scale)
+    assert response_error(result.model, system, ones_u / u_rms, ones_y / y_rms) < 1e-5

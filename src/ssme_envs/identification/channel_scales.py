@@ -34,11 +34,17 @@ CHANNEL_SPREAD = 1e6
 #   a spread of 30 on, a matter of weighting rather than of lost digits that no threshold
 #   separates from a balanced record: pass order=, or equilibrate such a record beforehand.)
 OUTPUT_SPREAD = 1e3
+# - Magnitude: a balanced record far from unit size (every channel times 1e-110 or 1e110) lost
+#   B and D's regression to round-off thresholds that are relative to one (refused as "the inputs
+#   do not determine B and D"), while 1e-100..1e100 identified as at unit size; a record with a
+#   channel's RMS outside MAGNITUDE..1 / MAGNITUDE is equilibrated too (50 decades of margin).
+MAGNITUDE = 1e-50
 
 
 def equilibration(u: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
     """Exponents of the powers of two nearest each input's and output's RMS, or None when the
-    record is balanced (``CHANNEL_SPREAD``, ``OUTPUT_SPREAD``) and is used as it is.
+    record is balanced (``CHANNEL_SPREAD``, ``OUTPUT_SPREAD``) and of moderate size
+    (``MAGNITUDE``) and is used as it is.
 
     Powers of two so that the scaling and its undoing are exact: the equilibrated record holds
     the record's own digits.
@@ -47,7 +53,8 @@ def equilibration(u: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     peak = np.max(np.abs(x), axis=0)  # > 0: check_record rejects constant channels
     rms = peak * np.sqrt(np.mean((x / peak) ** 2, axis=0))  # through the peak: x**2 may overflow
     out = rms[u.shape[1] :]
-    if np.max(rms) <= CHANNEL_SPREAD * np.min(rms) and np.max(out) <= OUTPUT_SPREAD * np.min(out):
+    balanced = np.max(rms) <= CHANNEL_SPREAD * np.min(rms) and np.max(out) <= OUTPUT_SPREAD * np.min(out)
+    if balanced and MAGNITUDE <= np.min(rms) and np.max(rms) <= 1.0 / MAGNITUDE:
         return None
     exponents = np.round(np.log2(rms)).astype(int)
     return exponents[: u.shape[1]], exponents[u.shape[1] :]
