@@ -608,3 +608,15 @@ def test_cli_identifies_a_record_in_extreme_torque_units_quietly(tmp_path, capsy
     linear = NozzleModel.load(out / "model.json").linear
     for name in ("J", "b", "k"):
         assert linear[name] == pytest.approx(ident.model.linear[name] * scale, rel=1e-6), name
+
+
+@pytest.mark.parametrize("scale", [1e-13, 1e-300])
+def test_an_angle_that_barely_moves_is_refused_by_name(strong, scale):
+    """The strong joint's record with its angle times 1e-13 or 1e-300 (largest |angle| below a
+    picoradian): no nozzle motion; at 1e-300 the joint fit's filtered derivatives underflowed (a
+    divide-by-zero warning, then 'does not show a mass-spring response')."""
+    _, record, _ = strong
+    with pytest.raises(
+        ValueError, match=r"^angle moves by at most [\d.e+-]+ rad, below 1e-12 rad: .* in rad\?$"
+    ):
+        fit_bouc_wen(record.tau, record.beta * scale, record.dt, workers=1)

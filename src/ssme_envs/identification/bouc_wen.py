@@ -111,13 +111,19 @@ class BoucWenFit:
     details: dict[str, float] = field(default_factory=dict)
 
 
+# A record whose angle never exceeds this (rad) shows no nozzle motion (sensor noise alone is about
+# 1e-4 rad); angles near 1e-300 underflowed in the joint fit's filtered derivatives (a divide by zero).
+MIN_MOTION = 1e-12
+
+
 def check_torque_record(
     tau: np.ndarray, x: np.ndarray, min_samples: int = 200, names: tuple[str, str] = ("torque", "angle")
 ) -> tuple[np.ndarray, np.ndarray]:
     """Validate a torque -> angle record (``names`` for the messages); returns 1-D float arrays.
 
     Beyond :func:`check_record` (lengths, NaN/inf, constant signals): enough samples, enough
-    torque changes, and an angle that starts at rest at zero, as the simulated model does.
+    torque changes, an angle that moves by at least ``MIN_MOTION`` rad and starts at rest at zero,
+    as the simulated model does.
     """
     tau, x = np.asarray(tau, dtype=float), np.asarray(x, dtype=float)
     if tau.ndim != 1 or x.ndim != 1:
@@ -129,6 +135,11 @@ def check_torque_record(
     changes = np.count_nonzero(np.diff(tau))
     if changes < 10:
         raise ValueError(f"{names[0]} changes only {changes} times: not exciting enough to fit dynamics")
+    if np.max(np.abs(x)) < MIN_MOTION:
+        raise ValueError(
+            f"{names[1]} moves by at most {np.max(np.abs(x)):.3g} rad, below {MIN_MOTION:g} rad: no nozzle "
+            "motion to fit (the joint fit's filtered derivatives of it underflow): is it in rad?"
+        )
     if abs(x[0]) > 0.05 * np.ptp(x):
         raise ValueError(
             f"{names[1]} starts at {x[0]:.4g}, not at rest at zero: give it as the deviation from the "
