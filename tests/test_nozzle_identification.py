@@ -620,3 +620,19 @@ def test_an_angle_that_barely_moves_is_refused_by_name(strong, scale):
         ValueError, match=r"^angle moves by at most [\d.e+-]+ rad, below 1e-12 rad: .* in rad\?$"
     ):
         fit_bouc_wen(record.tau, record.beta * scale, record.dt, workers=1)
+
+
+@pytest.mark.slow
+def test_cli_says_each_stage_of_a_user_record_with_the_bootstrap_time(tmp_path, capsys, strong):
+    """Work that grows with the record (a 200,000-sample record ran past two minutes with one line
+    shown): a line before the bootstrap, with its expected time, and one before the joint fit."""
+    _, record, _ = strong
+    data = tmp_path / "bench.csv"
+    write_nozzle_record(data, NozzleRecord(record.tau, record.beta, record.dt, "tau", "beta"))
+    assert main(["identify", "nozzle", "--data", str(data), "--out", str(tmp_path / "o")]) == 0
+    out = capsys.readouterr().out
+    assert re.search(r"^DSR_e: [\d.e+-]+ s; the standard errors of J, b, k: 100 bootstrap records "
+                     r"\(up to about [\d.e+-]+ s\)$", out, re.M)  # fmt: skip
+    assert re.search(
+        r"^the Bouc-Wen joint: evolutionary search, then least squares on all 2500 samples$", out, re.M
+    )

@@ -189,8 +189,9 @@ def nozzle_into(work: Path, records: dict[str, Any] | None, seed: int | None, wo
             "identifying: DSR_e linear model, then the Bouc-Wen joint (evolutionary search, least squares)"
         )
         ident = npipe.identify_nozzle(
-            records["identification"], seed=seed, workers=workers, normalization_A=normalization_a
-        )
+            records["identification"], seed=seed, workers=workers, normalization_A=normalization_a,
+            progress=progress,
+        )  # fmt: skip
         if "validation" in records:
             ident.model.fit["validation_record"] = npipe.validate_nozzle(ident.model, records["validation"])
     ident.model.save(work / "model.json")

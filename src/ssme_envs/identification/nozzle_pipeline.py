@@ -12,6 +12,8 @@ bench's or a user's.
 from __future__ import annotations
 
 import dataclasses
+import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -87,6 +89,7 @@ def identify_nozzle(
     normalization_A: float = DEFAULT_NORMALIZATION_A,
     replicates: int = DEFAULT_REPLICATES,
     bench_noise: float | None = None,
+    progress: Callable[[str], None] | None = None,
 ) -> NozzleIdentification:
     """DSR_e second-order linear model (as in the paper, for J, b, k) and the Bouc-Wen joint fit.
 
@@ -98,10 +101,14 @@ def identify_nozzle(
     on J, b, k is then removed (:func:`acquisition_bias`, ``BIAS_DRAWS`` simulated acquisitions,
     their scatter added to the covariance), and its bias on a determined Bouc-Wen fit's
     parameters (:func:`bouc_wen_acquisition_bias`, one noise-free acquisition and refit; the
-    covariance kept); the discrete model stays what the data give.
+    covariance kept); the discrete model stays what the data give. ``progress``: called with a
+    line before each stage, with the bootstrap's expected time (its cost grows with the record).
     """
     check_torque_record(record.tau, record.beta, names=(record.input_name, record.output_name))
+    say = progress or (lambda line: None)
+    start = time.perf_counter()
     subspace = dsr_e(record.tau, record.beta, record.dt, order=2)
+    once = time.perf_counter() - start
     linear = subspace.model
     tf = second_order_parameters(linear)
     bias = None
@@ -110,6 +117,10 @@ def identify_nozzle(
         tf = {**tf, **{key: tf[key] - bias[key] for key in bias}}
     boot = None
     if replicates:
+        say(
+            f"DSR_e: {once:.2g} s; the standard errors of J, b, k: {replicates} bootstrap records "
+            f"(up to about {replicates * once / max(workers, 1):.2g} s)"
+        )
         boot = dsr_e_uncertainty(
             record.tau, record.beta, record.dt, subspace, replicates=replicates, seed=seed, workers=workers
         )
@@ -122,6 +133,7 @@ def identify_nozzle(
             f"averaged over {BIAS_DRAWS} simulated acquisitions), covariance times 1 + 1/{BIAS_DRAWS} "
             "for their scatter",
         )
+    say(f"the Bouc-Wen joint: evolutionary search, then least squares on all {record.tau.size} samples")
     bw = fit_bouc_wen(
         record.tau, record.beta, record.dt, seed=seed, workers=workers, normalization_A=normalization_A
     )
