@@ -106,6 +106,11 @@ def identify_engine(args: argparse.Namespace) -> int:
         f"indices {list(model.observability_indices)}, lambda {[round(float(v), 4) for v in model.lam]}, "
         f"model SEE {[round(v, 4) for v in run.validation['identification']['model']['see']]}"
     )
+    from ssme_envs.identification.metrics import fit_warning
+
+    warning = fit_warning(model, run.validation["identification"]["model"]["fit_percent"])
+    if warning is not None:
+        print(warning)
     print(f"wrote {args.out / 'model.json'} and {run.report}")
     return 0
 

@@ -75,3 +75,22 @@ def finite_validation(
                         f"(its prediction overflows on this record{why})"
                     )
     return scores
+
+
+def fit_warning(model: AlphaCanonicalModel, fit: list[float]) -> str | None:
+    """A line for the console when the model's simulation fits a record worse than the outputs'
+    means (negative NRMSE fit, ``fit`` per output, %), saying what that means; None otherwise."""
+    bad = [(name, value) for name, value in zip(model.output_names, fit, strict=True) if value < 0.0]
+    if not bad:
+        return None
+    figures = ", ".join(f"{name} {value:.3g} %" for name, value in bad)
+    radius = model.spectral_radius()
+    if radius >= 1.0:
+        why = (
+            f"the model is unstable (spectral radius {radius:.4g}), and an unstable model's simulation "
+            "drifts away from any record, so SEE and fit say little of it: judge it by the filter's "
+            "one-step figures"
+        )
+    else:
+        why = "the record may not suit the model: check the structure (--indices) or try --method oe"
+    return f"warning: the model's simulation fits the record worse than the outputs' means ({figures}): {why}"
