@@ -146,6 +146,32 @@ def test_near_ties_are_settled_by_the_exact_scores(monkeypatch, seed):
         check()
 
 
+@pytest.mark.parametrize(("margin", "chosen"), [(None, 0), (0.01, 1)])
+def test_a_near_tie_within_half_the_margin_is_settled_by_the_exact_scores(monkeypatch, margin, chosen):
+    """A near tie set up on a real record's candidates: two orders whose exact BICs differ by 0.02
+    (every other order 10 or more above), screened with errors of 0.045 against the better one
+    (just under half of TIE_MARGIN = 0.1), so that the screen ranks the worse first. The margin
+    keeps the better one a contender and the exact scores choose it; with a margin of 0.01 the
+    screen's ranking would decide (the second case: the check can fail)."""
+    u, y = noisy_record(0, 0.05)
+    e, left, singular_values, candidates = pass_data(u, y)
+    m, p, count = u.shape[1], y.shape[1], y.shape[0] - 12
+    pair = candidates[:2]  # the lowest orders realize on this record
+    exact = {n: 1000.0 + 10.0 * (n not in pair) + 0.02 * (n == pair[1]) for n in candidates}
+    error = {n: 0.045 if n == pair[0] else -0.045 for n in candidates}
+
+    def screened(matrices, *args) -> float:
+        n = matrices[0].shape[0]
+        return (exact[n] + error[n] - subspace_bic._bic(count, 0.0, n, m, p)) / count
+
+    monkeypatch.setattr(subspace_bic, "screened_criterion", screened)
+    monkeypatch.setattr(subspace_bic, "_exact_bic", lambda model, *args: exact[model.n_states])
+    if margin is not None:
+        monkeypatch.setattr(subspace_bic, "TIE_MARGIN", margin)
+    order, model = subspace_bic.bic_order(left, singular_values, candidates, u, y, e, 12, 1.0)
+    assert order == pair[chosen] and model.n_states == order
+
+
 def test_a_contender_failing_its_exact_scoring_falls_back_to_the_exact_scan(monkeypatch):
     """Should the screen's winner fail its exact realization, every candidate is scored exactly:
     the result is the exact scan's without that candidate."""
