@@ -66,6 +66,26 @@ def test_a_noisy_two_level_input_of_unequal_magnitude_is_refused():
         identify(u, y, 0.04, indices=(2, 2))
 
 
+@settings(max_examples=10, deadline=None)
+@given(offset=st.floats(0.01, 1.0), column=st.integers(0, 1), sign=st.sampled_from([-1.0, 1.0]))
+def test_an_input_that_never_changes_sign_is_refused_as_such(offset, column, sign):
+    """A valve given as a position rather than a deviation (the PRBS shifted by at least its
+    amplitude, up or down): lambda acts about the operating point, so the record is refused
+    naming the input and the remedies (it used to be called "two levels of different magnitude",
+    and so was a ramp such as the t column). Without the asymmetric gains the same record of a
+    symmetric plant identifies, the offset going to the intercept: Table I's 100 % Markov
+    parameters (lambda = 1, scipy's simulation of the deviations) to 1e-6."""
+    u, _ = _record(0.0, 0, seed=2)
+    truth = published_model(100)
+    y = dlsim(truth.A, truth.B, truth.C, u)
+    shifted = u.copy()
+    shifted[:, column] += sign * offset
+    with pytest.raises(ValueError, match=rf"^input 'u{column}' never changes sign .* \(--symmetric\)$"):
+        identify(shifted, y, 0.04, indices=(2, 2))
+    model = identify(shifted, y, 0.04, indices=(2, 2), asymmetric=False, uncertainty=False).model
+    np.testing.assert_allclose(model.markov_parameters(8), truth.markov_parameters(8), atol=1e-6)
+
+
 @pytest.mark.parametrize("indices", [(9_999_999, 1), (200, 200), (2,), (2, 2, 2), (0, 2), (2.0, 2)])
 def test_indices_that_the_record_cannot_fit_are_refused(indices):
     u, y = _record(0.0, 0, seed=2)

@@ -43,7 +43,8 @@ def _binary_amplitudes(u: np.ndarray, names: Sequence[str] | None = None) -> np.
     Raises
     ------
     ValueError
-        For an input that switches between two levels of different magnitude (to within
+        For an input that never changes sign (its |u| is u or -u), or one that switches between
+        two levels of different magnitude (to within
         :data:`COLLINEAR_SHARE`): its |u| is an affine function of u, so lambda cannot be told
         apart from B and an offset.
     """
@@ -53,6 +54,14 @@ def _binary_amplitudes(u: np.ndarray, names: Sequence[str] | None = None) -> np.
         scale = mag[:, j].mean()
         if not scale > 0:
             continue
+        if np.all(u[:, j] >= 0.0) or np.all(u[:, j] <= 0.0):  # |u| is +-u: no asymmetry to see
+            name = names[j] if names is not None else f"u{j}"
+            raise ValueError(
+                f"input '{name}' never changes sign (from {u[:, j].min():g} to {u[:, j].max():g}): the "
+                "asymmetric gains lambda (eq 36) act about the operating point, so the inputs must be "
+                "deviations from it; subtract the operating point, or identify without the asymmetric "
+                "gains (--symmetric)"
+            )
         spread = _rms(mag[:, j] - scale)
         design = np.column_stack([np.ones(u.shape[0]), u[:, j]])
         coef = np.linalg.lstsq(design, mag[:, j], rcond=None)[0]
