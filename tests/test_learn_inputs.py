@@ -375,3 +375,40 @@ def test_a_default_minibatch_above_the_rollout_is_the_rollout_and_trains_the_sam
     with pytest.warns(UserWarning, match="mini-batch size of 64"):
         by_sb3 = trained(64)
     assert all(torch.equal(a, b) for a, b in zip(by_sb3, trained(10), strict=True))
+
+
+@pytest.mark.parametrize(
+    ("text", "problem"),
+    [
+        ('{"schema": 2, "dt": 0.04, "A": [[0.5]]}', "line 1: not an Optuna journal record"),  # a model.json
+        ('{"schema": 2, "dt": 0.04}\n', "line 1: not an Optuna journal record"),
+        (
+            '{"op_code": 0, "worker_id": "x", "study_name": "s", "directions": [1]}\n{"op_code": 0, "wor',
+            r"line 2: its last line is cut off \(an interrupted write\?\): remove that line",
+        ),
+    ],
+    ids=["json-file-without-newline", "json-file", "cut-off-last-line"],
+)
+def test_a_file_that_is_not_a_whole_journal_is_refused_and_left_alone(tmp_path, capsys, text, problem):
+    """Another kind of JSON file named as the journal, or a journal whose last record was cut off:
+    Optuna appended its records to the file (a model.json was corrupted, then a traceback; the cut
+    record had the next one glued on), now both are refused by name with nothing written."""
+    journal = tmp_path / "j.log"
+    journal.write_text(text, encoding="utf-8")
+    assert main([*TUNE, "--storage", f"journal:{journal}"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1, err
+    assert re.fullmatch(
+        rf"error: --storage journal:{re.escape(str(journal))}: .* journal \({problem}\)\n", err
+    )
+    assert journal.read_text(encoding="utf-8") == text
+
+
+def test_tune_keeps_stderr_for_errors(tmp_path, capsys):
+    """Optuna's log lines ("A new study created ...", each trial) go to stdout with the rest of the
+    progress: stderr holds nothing on success, and only the error line otherwise."""
+    journal = tmp_path / "j.log"
+    assert main([*TUNE, "--storage", f"journal:{journal}"]) == 0
+    captured = capsys.readouterr()
+    assert captured.err == ""
+    assert "A new study created in Journal with name: s" in captured.out

@@ -25,7 +25,6 @@ shared study is not reproducible bit for bit; a single worker on a fresh study i
 
 from __future__ import annotations
 
-import json
 import math
 import os
 import socket
@@ -45,72 +44,9 @@ from ssme_envs.tuning_spaces import (
     sample_sac,
     sample_td3,
 )
+from ssme_envs.tuning_storage import log_to_stdout, open_storage
 
 EVAL_SEED = 1_000_000  # first evaluation episode: apart from the harness's seeds (0, ...) that reports use
-
-
-def open_storage(url: str) -> Any:
-    """The Optuna storage of ``journal:PATH`` (a journal file) or of an RDB URL; ValueError
-    naming the problem (unknown form, missing directory, a file that is not an Optuna journal,
-    database unreachable or its driver not installed)."""
-    import optuna
-
-    if not isinstance(url, str) or not url:
-        raise ValueError("--storage must be journal:PATH or a database URL such as sqlite:///study.db")
-    if url.startswith("journal:"):
-        path = Path(url.removeprefix("journal:"))
-        if not path.name or path.is_dir():
-            raise ValueError(f"--storage {url}: journal:PATH needs a file path")
-        if not path.parent.is_dir():
-            raise ValueError(f"--storage {url}: directory {path.parent} does not exist")
-        if path.exists() and not path.is_file():  # a FIFO blocks Optuna's read, a device never ends it
-            raise ValueError(f"--storage {url}: {path} is not a regular file")
-        from optuna.storages.journal import JournalFileBackend
-
-        _check_journal_lines(path, url)
-        try:  # Optuna replays the records at once, trusting their fields
-            return optuna.storages.JournalStorage(JournalFileBackend(str(path)))
-        except OSError:
-            raise  # the CLI names the file and the reason
-        except Exception as exc:
-            raise ValueError(f"--storage {url}: {path} is not a readable Optuna journal (replaying it "
-                             f"failed: {type(exc).__name__}: {exc})") from None  # fmt: skip
-    import sqlalchemy
-
-    try:
-        sqlalchemy.engine.make_url(url)
-    except sqlalchemy.exc.ArgumentError:
-        raise ValueError(
-            f"--storage {url!r}: not journal:PATH nor a database URL (sqlite:///study.db, "
-            "postgresql://user:password@host/db, mysql+pymysql://...)"
-        ) from None
-    try:
-        return optuna.storages.RDBStorage(url)
-    except ImportError as exc:  # the database's driver (psycopg2, pymysql, ...)
-        raise ValueError(f"--storage {url}: the database driver is not installed ({exc})") from None
-    except (sqlalchemy.exc.SQLAlchemyError, ValueError) as exc:
-        raise ValueError(f"--storage {url}: cannot open the database ({str(exc).splitlines()[0]})") from None
-
-
-def _check_journal_lines(path: Path, url: str) -> None:
-    """ValueError unless every line of the journal at ``path`` (if any) is a JSON object. Optuna
-    stops only at the line after a broken one, maybe after this worker has appended to the file or
-    mid-study; an unfinished last line is another worker's record being appended (Optuna's own
-    reading skips it), so it only has to start as one does."""
-    if not path.is_file():
-        return
-    with path.open("rb") as fh:
-        for number, line in enumerate(fh, start=1):
-            if not line.endswith(b"\n"):
-                problem = None if line.startswith(b"{") else "not a JSON record"
-            else:
-                try:
-                    problem = None if isinstance(json.loads(line), dict) else "not a JSON object"
-                except ValueError as exc:  # JSONDecodeError, UnicodeDecodeError
-                    problem = str(exc)
-            if problem is not None:
-                raise ValueError(f"--storage {url}: {path} is not a readable Optuna journal "
-                                 f"(line {number}: {problem})")  # fmt: skip
 
 
 def _study(storage: Any, name: str, attrs: dict[str, Any], seed: int) -> Any:
@@ -311,6 +247,7 @@ def tune(
     if not study_name:
         raise ValueError("--study must be a non-empty name")
     optuna.logging.set_verbosity(optuna.logging.INFO if progress else optuna.logging.WARNING)
+    log_to_stdout()
     budget = Budget(timesteps, num_envs, evaluations)
     attrs = {"env": env_id, "algo": algo, "timesteps": timesteps, "num_envs": num_envs,
              "evaluations": evaluations, "eval_episodes": eval_episodes}  # fmt: skip
