@@ -188,3 +188,23 @@ def test_sub_env_views_and_partial_reset_before_a_full_one():
         view.step(np.zeros(1))
     with pytest.raises(ValueError, match="unknown option"):
         view.reset(options={"reset_mask": np.ones(3, bool)})
+
+
+@pytest.mark.parametrize("env_id", list(ENVS))
+@pytest.mark.parametrize("value", [1.7e308, -1.7e308])
+def test_huge_finite_actions_are_clipped_without_warnings(env_id, value):
+    """Actions near the float64 limit are legal (clipped to [-1, 1]): the native vector env steps
+    as gymnasium's SyncVectorEnv does, without the overflow warning its finiteness check (a sum)
+    used to raise, which under -W error refused a legal action."""
+    import warnings
+
+    sync, native = _pair(env_id, AutoresetMode.NEXT_STEP)
+    action = np.full((N, *native.single_action_space.shape), value)
+    sync.reset(seed=3)
+    native.reset(seed=3)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        got = native.step(action)
+    want = sync.step(action)
+    for a, b in zip(got[:4], want[:4], strict=True):
+        np.testing.assert_array_equal(a, b)
