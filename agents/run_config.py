@@ -36,6 +36,8 @@ CONFIG_KEYS = {
     "residual_scale": float,  # the residual's action scale, in (0, 2]
     "residual_penalty": float,  # training reward minus this x |the correction|^2 (agents.residual)
 }
+# Environment steps of one run at most: 1e12 is months at the adapter's speed (about 40,000 a second).
+MAX_STEPS = 10**12
 DEFAULTS = {"steps": 200_000, "seed": 0, "num_envs": 64, "eval_freq": 50_000, "eval_episodes": 20,
             "tensorboard": False, "env_options": {}, "hyperparameters": {}, "policy": {}}  # fmt: skip
 RESIDUAL_SCALE = 0.5  # the residual's default action scale
@@ -67,6 +69,8 @@ def check_config(config: dict[str, Any], source: str = "config") -> dict[str, An
     for key in ("steps", "num_envs", "eval_freq", "eval_episodes"):
         if full[key] < 1:
             raise ValueError(f"{source}: {key} must be positive, got {full[key]}")
+    if full["steps"] > MAX_STEPS:  # beyond it a run never ends (and 1e23 steps rounded through floats)
+        raise ValueError(f"{source}: steps must be at most {MAX_STEPS:.0e}, got {full['steps']:.3g}")
     if not 0 <= full["seed"] <= MAX_SEED:  # numpy's and SB3's seeding take 32 bits
         raise ValueError(f"{source}: seed must be within 0-{MAX_SEED}, got {full['seed']}")
     accepted = inspect.signature(_algorithm(full["algo"]).__init__).parameters
@@ -176,12 +180,12 @@ def plan_steps(config: dict[str, Any], source: str = "config") -> tuple[int, dic
     if algo == "ppo":
         if "n_steps" not in hyper:
             default = defaults["n_steps"].default
-            rollouts = math.ceil(asked / (default * n))
-            n_steps = max(math.ceil(asked / (rollouts * n)), 2 if n == 1 else 1)
+            rollouts = -(-asked // (default * n))  # integer ceilings: exact for any steps
+            n_steps = max(-(-asked // (rollouts * n)), 2 if n == 1 else 1)
             batch = int(hyper.get("batch_size", defaults["batch_size"].default))
             multiple = batch // math.gcd(batch, n)  # whole minibatches per rollout where it costs little
             if n_steps >= multiple:
-                n_steps = math.ceil(n_steps / multiple) * multiple
+                n_steps = -(-n_steps // multiple) * multiple
             hyper["n_steps"] = n_steps
             fitted = f" (n_steps {n_steps} fitted to the steps asked; set hyperparameters.n_steps to choose)"
         unit, what = int(hyper["n_steps"]) * n, f"rollouts of n_steps {hyper['n_steps']} x {n} envs"
@@ -203,7 +207,7 @@ def plan_steps(config: dict[str, Any], source: str = "config") -> tuple[int, dic
             )
         unit, what = freq * n, f"collections of train_freq {freq} x {n} envs"
     unit = max(unit, 1)  # a zero n_steps or train_freq: SB3 names it when the model is made
-    steps = math.ceil(asked / unit) * unit
+    steps = -(-asked // unit) * unit
     note = None
     if steps != asked or fitted:
         note = f"{algo} trains in whole {what}: {steps:,} steps for the {asked:,} asked{fitted}"
@@ -214,6 +218,7 @@ __all__ = [
     "CONFIG_KEYS",
     "DEFAULTS",
     "MAX_LAYERS",
+    "MAX_STEPS",
     "MAX_UNITS",
     "RESIDUAL_SCALE",
     "check_config",

@@ -16,6 +16,8 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 pytest.importorskip("stable_baselines3")
 
@@ -412,3 +414,36 @@ def test_tune_keeps_stderr_for_errors(tmp_path, capsys):
     captured = capsys.readouterr()
     assert captured.err == ""
     assert "A new study created in Journal with name: s" in captured.out
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    asked=st.one_of(st.integers(1, 10**12), st.integers(10**12 - 10**6, 10**12)),
+    num_envs=st.integers(1, 256),
+    algo=st.sampled_from(["ppo", "sac"]),
+    n_steps=st.one_of(st.none(), st.integers(2, 4096)),
+)
+def test_the_steps_are_rounded_up_to_whole_collections_exactly(asked, num_envs, algo, n_steps):
+    """Any steps up to MAX_STEPS: the plan trains at least the steps asked, in whole collections,
+    less than one collection more (integer arithmetic here; 1e23 steps came out rounded down
+    through floats, to 99,999,999,999,999,991,611,392)."""
+    from agents.run_config import MAX_STEPS, check_config, plan_steps
+
+    hyper = {} if n_steps is None or algo != "ppo" else {"n_steps": n_steps, "batch_size": 2}
+    config = check_config({"algo": algo, "env": NOZZLE, "steps": asked, "num_envs": num_envs,
+                           "hyperparameters": hyper})  # fmt: skip
+    steps, planned, _ = plan_steps(config)
+    unit = planned["n_steps"] * num_envs if algo == "ppo" else planned.get("train_freq", 1) * num_envs
+    assert asked <= steps < asked + unit and steps % unit == 0 and asked <= MAX_STEPS
+
+
+@pytest.mark.parametrize("steps", [10**12 + 1, 10**23])
+def test_steps_beyond_the_cap_are_refused(tmp_path, capsys, steps):
+    """Beyond 1e12 steps (months of training) a run never ends: refused before any work."""
+    code = main(
+        ["train", "--env", NOZZLE, "--algo", "ppo", "--steps", str(steps), "--out", str(tmp_path / "t")]
+    )
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1
+    assert re.fullmatch(r"error: options: steps must be at most 1e\+12, got [\d.e+]+\n", err), err
+    assert not (tmp_path / "t").exists()
