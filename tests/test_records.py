@@ -491,3 +491,25 @@ def test_a_negative_fit_is_said_with_what_it_means():
     assert np.all(fit < 0)
     assert re.search(r"--indices\) or try --method oe$", fit_warning(stable, fit.tolist()))
     assert fit_warning(stable, fit_percent(y, model_prediction(stable, u)).tolist()) is None
+
+
+def _validate(model_path, data, out) -> int:
+    return main(["validate", "engine", "--model", str(model_path), "--data", str(data), "--out", str(out)])
+
+
+@pytest.mark.parametrize("samples", [2, 9])
+def test_cli_validate_refuses_a_record_too_short_to_judge_the_model(tmp_path, capsys, model_path, samples):
+    """The 4-state model on 2 or 9 samples: SEE and fit said 96 % of a 2-sample record; now refused
+    below 2 (4 + 1) = 10 samples, naming the count needed (10 samples are judged)."""
+    code = _validate(model_path, _csv(tmp_path / "short.csv", _good()[:samples]), tmp_path / "v")
+    pattern = (
+        rf"short\.csv: the record has {samples} samples; SEE and fit of a 4-state model need at least 10"
+    )
+    _one_error_line(code, capsys.readouterr().err, pattern)
+    assert _validate(model_path, _csv(tmp_path / "enough.csv", _good()[:10]), tmp_path / "w") == 0
+
+
+def test_a_one_row_record_is_refused_for_its_length_not_its_time_column(tmp_path, capsys, model_path):
+    code = _validate(model_path, _csv(tmp_path / "one.csv", _good()[:1]), tmp_path / "v")
+    pattern = r"one\.csv: the record has 1 sample\(s\): a sample time needs two"
+    _one_error_line(code, capsys.readouterr().err, pattern)

@@ -63,7 +63,9 @@ def _number(cell: str) -> float:
 def _sample_time(path: Path, t: np.ndarray, dt: float | None) -> float:
     """The step of a uniformly spaced time column (s), checked against a given ``dt``."""
     steps = np.diff(t)
-    if t.size < 2 or not np.all(np.isfinite(t)) or np.any(steps <= 0):
+    if t.size < 2:
+        raise ValueError(f"{path}: the record has {t.size} sample(s): a sample time needs two")
+    if not np.all(np.isfinite(t)) or np.any(steps <= 0):
         raise ValueError(f"{path}: column 't' must increase strictly")
     step = float(np.median(steps))
     # each stamp is rounded to the spacing of floats at its magnitude: a step is known to two of them
