@@ -71,6 +71,18 @@ def augmented(design: LinearDesign, integral_ratio: float) -> tuple[np.ndarray, 
     return a_z, b_z, q_z, design.rate_weight * np.eye(m)
 
 
+def _riccati(a: np.ndarray, b: np.ndarray, q: np.ndarray, r: np.ndarray, what: str, hint: str) -> np.ndarray:
+    """``scipy.linalg.solve_discrete_are``, with a ValueError naming the gain and the likely cause
+    where the equation has no stabilizing solution (scipy's own text speaks of Schur forms)."""
+    try:
+        return scipy.linalg.solve_discrete_are(a, b, q, r)
+    except (np.linalg.LinAlgError, ValueError) as exc:
+        raise ValueError(
+            f"cannot design {what} on this design model: its Riccati equation has no stabilizing "
+            f"solution ({str(exc).splitlines()[0]}); {hint}"
+        ) from None
+
+
 def design_servo(
     design: LinearDesign, integral_ratio: float = 0.02, process_ratio: float = 10.0
 ) -> ServoDesign:
@@ -84,7 +96,13 @@ def design_servo(
         if isinstance(value, bool) or not isinstance(value, int | float) or not 0 < value < np.inf:
             raise ValueError(f"{name} must be a positive number, got {value!r}")
     a_z, b_z, q_z, r = augmented(design, integral_ratio)
-    p_z = scipy.linalg.solve_discrete_are(a_z, b_z, q_z, r)
+    if not np.any(design.B):
+        raise ValueError(
+            "the design model's B is zero: its inputs move nothing, so no controller can be designed on it"
+        )
+    p_z = _riccati(
+        a_z, b_z, q_z, r, "the LQ servo's gain", "has it an unstable mode out of the inputs' reach?"
+    )
     gain = np.linalg.solve(r + b_z.T @ p_z @ b_z, b_z.T @ p_z @ a_z)
     a, b, c = design.A, design.B, design.C
     n, m, p = a.shape[0], b.shape[1], c.shape[0]
@@ -95,7 +113,9 @@ def design_servo(
     # fragile to model error (the identified 70 % model on the 67 % engine: spectral radius
     # 0.998 instead of 0.87).
     meas = np.diag(np.maximum(design.noise_std, 0.25 * disturbance * np.max(np.abs(c @ b))) ** 2)
-    cov = scipy.linalg.solve_discrete_are(a.T, c.T, proc, meas)
+    cov = _riccati(
+        a.T, c.T, proc, meas, "the Kalman filter's gain", "has it an unstable mode the outputs do not see?"
+    )
     kalman = cov @ c.T @ np.linalg.inv(c @ cov @ c.T + meas)
     square = np.block([[a - np.eye(n), b], [c, np.zeros((p, m))]])
     target = np.linalg.lstsq(square, np.vstack([np.zeros((n, p)), np.eye(p)]), rcond=None)[0]

@@ -434,3 +434,23 @@ def test_mpc_first_move_is_the_independent_qp_s(pick, binding):
     x_hat = x_pred + update @ (y - c @ x_pred)
     expected, _ = independent_first_move(a, b, c, ew, rw, scale, x_hat, u_prev, q, r)
     np.testing.assert_allclose(first[k, i], expected, atol=1e-4)
+
+
+def test_a_design_model_no_controller_can_stabilize_is_refused_by_name():
+    """The nozzle's identified design (two states, one input, one output) with B zeroed, and with a
+    third state, unstable (1.05) and out of the input's reach but seen by the output: the LQ servo
+    cannot be designed on either. A scipy Riccati error about Schur forms (or "Failed to find a
+    finite solution") was the CLI's message; now the cause is named."""
+    import dataclasses
+
+    d = design(NOZZLE, "identified")
+    zero_b = dataclasses.replace(d, plant=dataclasses.replace(d.plant, B=np.zeros_like(d.B)))
+    with pytest.raises(ValueError, match=r"^the design model's B is zero: its inputs move nothing"):
+        design_servo(zero_b)
+    a = scipy.linalg.block_diag(d.A, [[1.05]])
+    b = np.vstack([d.B, [[0.0]]])
+    c = np.hstack([d.C, np.ones((d.C.shape[0], 1))])
+    unreachable = dataclasses.replace(d, plant=dataclasses.replace(d.plant, A=a, B=b, C=c))
+    with pytest.raises(ValueError, match=r"^cannot design the LQ servo's gain on this design model: .*"
+                                         r"out of the inputs' reach\?$"):  # fmt: skip
+        design_servo(unreachable)
