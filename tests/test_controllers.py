@@ -210,3 +210,21 @@ def test_a_shipped_policy_name_that_is_also_a_run_directory_here_is_refused(tmp_
         parse_controller("ppo:spread", NOZZLE)
     (tmp_path / "identified").mkdir()  # a directory that holds no policy: no ambiguity
     assert callable(parse_controller("ppo:identified", TRACKING))
+
+
+def test_a_controller_the_options_rule_out_fails_before_any_rollout(tmp_path):
+    """An engine plant of our own with dt 0.02 s: the controllers designed on the identified model
+    (dt 0.04 s) cannot be; the error came after the controllers before it had run their episodes
+    (a progress line, then the error); now every controller is designed once first."""
+    import dataclasses
+
+    from ssme_envs.models import identified_model
+
+    path = tmp_path / "fast.json"
+    dataclasses.replace(identified_model(100), dt=0.02).save(path)
+    said: list[str] = []
+    factories = {name: parse_controller(name, TRACKING) for name in ("zero", "lqi")}
+    expected = r"^the identified design model has dt 0\.04 s but the env's plant 0\.02 s"
+    with pytest.raises(ValueError, match=expected):
+        evaluate(TRACKING, factories, ["nominal"], 1, options={"plant": str(path)}, progress=said.append)
+    assert said == []

@@ -350,6 +350,12 @@ def evaluate(
             make_env(env_id, scenario, 1, options).close()
         except ValueError as exc:
             raise ValueError(f"scenario {scenario!r}: {exc}") from None
+    for factory in controllers.values():  # each designed once before any rollout: a design the
+        env = make_env(env_id, names[0], 1, options)  # options rule out fails first, not midway
+        try:
+            factory(env)
+        finally:
+            env.close()
     say = progress or (lambda _: None)
     layout = layout_of(env_id)
     result = EvaluationResult(env_id)
