@@ -273,3 +273,20 @@ def test_a_library_run_refuses_inputs_inside_the_earlier_run_it_would_replace(tm
     with pytest.raises(OutputError, match=message):
         run()
     assert _tree(out) == before
+
+
+def test_a_dangling_symlink_as_the_output_is_refused_and_a_live_one_followed(tmp_path):
+    """A link to a missing directory: the run followed it and created the directory and its
+    parents wherever it pointed (outside the folder named); now refused by name. A link to an
+    existing directory is written through, as before."""
+    away = tmp_path / "away" / "deeper"
+    link = tmp_path / "out"
+    link.symlink_to(away)
+    with pytest.raises(OutputError, match=r"out: a symbolic link to .*deeper, which does not exist"):
+        with run_directory(link):
+            pass
+    assert not (tmp_path / "away").exists()
+    away.mkdir(parents=True)
+    with run_directory(link) as work:
+        write_text(work / "a", "1")
+    assert (away / "a").read_text() == "1"

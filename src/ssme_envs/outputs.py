@@ -211,6 +211,11 @@ def check_target(out: str | Path) -> Path:
     """The absolute output directory for ``out``; OutputError when it cannot be one."""
     target = Path(os.path.abspath(out))
     if target.is_symlink():
+        if not target.exists():  # following it would create directories wherever it points
+            raise OutputError(
+                f"{out}: a symbolic link to {os.readlink(target)}, which does not exist: name a directory, "
+                "or create the link's target first"
+            )
         target = target.resolve()
     if not target.name or target == target.parent:
         raise OutputError(f"{out}: an output directory needs a name (not a file-system root)")
