@@ -315,3 +315,30 @@ def test_special_files_are_refused_naming_the_path(tmp_path, load):
         file.truncate(MAX_JSON_BYTES + 1)  # sparse: no disk used
     with pytest.raises(ValueError, match=re.escape(f"{big}: larger than 64 MiB, too large for a model file")):
         load(big)
+
+
+@pytest.mark.parametrize(
+    ("load", "model", "key"),
+    [
+        (AlphaCanonicalModel.load, lambda: identified_model(100), "dt"),
+        (AlphaCanonicalModel.load, lambda: identified_model(100), "method"),  # inside "uncertainty"
+        (NozzleModel.load, identified_nozzle, "J"),  # inside "linear"
+    ],
+    ids=["engine-top", "engine-nested", "nozzle-nested"],
+)
+def test_a_key_given_twice_is_refused_naming_it(tmp_path, load, model, key):
+    """JSON keeps the last of a repeated key silently, where other readers keep the first: a
+    model.json with one is refused, naming the key, at any depth (the text written here by hand
+    from the saved file: the key's first occurrence repeated in front of it)."""
+    path = tmp_path / "model.json"
+    model().save(path)
+    text = path.read_text()
+    start = text.index(f'"{key}":')
+    value = start + len(json.dumps(key)) + 1
+    value += len(text[value:]) - len(text[value:].lstrip())
+    i = json.JSONDecoder().raw_decode(text, value)[1]  # the end of the key's value
+    duplicate = tmp_path / "twice.json"
+    duplicate.write_text(text[:start] + text[start:i] + "," + text[start:])
+    with pytest.raises(ValueError, match=rf"twice\.json: key '{key}' appears twice in one object"):
+        load(duplicate)
+    load(path)

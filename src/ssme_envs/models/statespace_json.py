@@ -148,12 +148,29 @@ def save_engine_model(model: AlphaCanonicalModel, path: str | Path) -> None:
     write_text(path, dumps_compact(engine_model_to_dict(model)) + "\n")
 
 
+class _DuplicateKey(ValueError):
+    """A key that appears twice in one JSON object."""
+
+
+def _unique_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    """A JSON object's pairs as a dict, refusing a repeated key (json keeps the last silently)."""
+    out: dict[str, Any] = {}
+    for key, value in pairs:
+        if key in out:
+            raise _DuplicateKey(key)
+        out[key] = value
+    return out
+
+
 def read_json(path: str | Path) -> Any:
-    """Parse a JSON file; a missing, special or oversized file or bad JSON is a ValueError naming it."""
+    """Parse a JSON file; a missing, special or oversized file, bad JSON or a key repeated in an
+    object (which JSON readers resolve differently) is a ValueError naming it."""
     path = Path(path)
     raw = read_or_refuse(path, MAX_JSON_BYTES, "valid JSON", "a model file")
     try:
-        return json.loads(raw.decode("utf-8"))
+        return json.loads(raw.decode("utf-8"), object_pairs_hook=_unique_keys)
+    except _DuplicateKey as exc:
+        raise ValueError(f"{path}: key {str(exc)!r} appears twice in one object (which counts?)") from None
     except RecursionError:
         raise ValueError(f"{path}: nested too deeply to read as JSON") from None
     except json.JSONDecodeError as exc:
