@@ -499,3 +499,20 @@ def test_a_deeply_nested_plant_file_is_a_value_error_naming_it(tmp_path, env_id)
     path.write_text("[" * 100_000 + "]" * 100_000)
     with pytest.raises(ValueError, match=re.escape(f"{path}: nested too deeply to read as JSON")):
         gym.make(env_id, plant=str(path))
+
+
+def test_substeps_take_numpy_integers_as_the_other_integer_options_do():
+    """np.int64(4) was refused ('must be an integer') where every other numeric option takes
+    numpy scalars; it now steps as the int 4 does, bit for bit; numpy booleans and floats stay
+    refused."""
+    numpy_count, plain = gym.make(NOZZLE, substeps=np.int64(4)), gym.make(NOZZLE, substeps=4)
+    assert numpy_count.unwrapped.task.substeps == 4 and type(numpy_count.unwrapped.task.substeps) is int
+    numpy_count.reset(seed=1)
+    plain.reset(seed=1)
+    for action in 0.05 * np.sin(np.arange(20)):  # small: the episode stays in its envelope
+        a, b = numpy_count.step(np.array([action])), plain.step(np.array([action]))
+        np.testing.assert_array_equal(a[0], b[0])
+        assert a[1:3] == b[1:3]
+    for bad in (np.bool_(True), np.float64(4.0), np.int64(0)):
+        with pytest.raises(ValueError, match="substeps must be an integer in 1-10000"):
+            gym.make(NOZZLE, substeps=bad)

@@ -163,9 +163,14 @@ class NozzleTask:
         envelope = math.radians(6.0)
         if substeps is None:  # the worst joint the spread can draw (its corners) sets the count
             substeps = rule_substeps(joints, envelope)
-        elif not isinstance(substeps, int) or isinstance(substeps, bool) or not 1 <= substeps <= MAX_SUBSTEPS:
+        elif (
+            not isinstance(substeps, int | np.integer)  # numpy's too, as the other integer options
+            or isinstance(substeps, bool | np.bool_)
+            or not 1 <= substeps <= MAX_SUBSTEPS
+        ):
             raise ValueError(f"substeps must be an integer in 1-{MAX_SUBSTEPS}, got {shown(substeps)}")
         else:  # the caller's count: accuracy is theirs, stability is checked
+            substeps = int(substeps)
             for joint in joints:
                 check_stable_substeps(joint, substeps, NOZZLE_DT, envelope, DEFAULT_TORQUE_LIMIT)
         return cls(
