@@ -70,7 +70,7 @@ def check_config(config: dict[str, Any], source: str = "config") -> dict[str, An
         if full[key] < 1:
             raise ValueError(f"{source}: {key} must be positive, got {full[key]}")
     if full["steps"] > MAX_STEPS:  # beyond it a run never ends (and 1e23 steps rounded through floats)
-        raise ValueError(f"{source}: steps must be at most {MAX_STEPS:.0e}, got {full['steps']:.3g}")
+        raise ValueError(f"{source}: steps must be at most {MAX_STEPS:,}, got {full['steps']:,}")
     if not 0 <= full["seed"] <= MAX_SEED:  # numpy's and SB3's seeding take 32 bits
         raise ValueError(f"{source}: seed must be within 0-{MAX_SEED}, got {full['seed']}")
     accepted = inspect.signature(_algorithm(full["algo"]).__init__).parameters

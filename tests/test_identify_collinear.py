@@ -65,3 +65,21 @@ def test_inputs_correlated_but_well_excited_are_kept(seed):
     u[:, 1] = u[:, 0] + 0.3 * rng.standard_normal(1000)
     y = noisy(dlsim(a, b, c, u), 0.1, rng)
     identify(u, y, 1.0, uncertainty=False)
+
+
+@pytest.mark.parametrize(("input_unit", "output_unit"), [(1e-9, 1e6), (1e6, 1e-9), (1.0, 1.0)])
+def test_the_noise_behind_the_limit_does_not_depend_on_the_units(input_unit, output_unit):
+    """Inputs correlated at 0.05 independent noise, 0.1 % output noise, in units far apart: the
+    record identifies as at unit scale (the noise estimate's ARX fit, on raw channels, dropped the
+    tiny inputs and counted their response as 69 % noise, refusing it); the same inputs with 10 %
+    output noise and 1e-5 independent noise are refused in any units."""
+    rng = np.random.default_rng(1)
+    a, b, c = random_system(3, 2, 2, rng)
+    u = rng.standard_normal((1000, 2))
+    u[:, 1] = u[:, 0] + 0.05 * rng.standard_normal(1000)
+    y = noisy(dlsim(a, b, c, u), 1e-3, rng)
+    identify(u * input_unit, y * output_unit, 1.0, uncertainty=False, asymmetric=False)
+    u[:, 1] = u[:, 0] + 1e-5 * rng.standard_normal(1000)
+    y = noisy(dlsim(a, b, c, u), 0.1, rng)
+    with pytest.raises(ValueError, match="nearly collinear"):
+        identify(u * input_unit, y * output_unit, 1.0, uncertainty=False, asymmetric=False)

@@ -365,3 +365,14 @@ def test_a_record_too_short_for_the_given_order_names_the_length_needed(samples)
         dsr_e(u, y, 0.008, order=2)
     longer = rng.standard_normal((234, 1))
     assert dsr_e(longer, dlsim(a, b, c, longer), 0.008, order=2).order == 2
+
+
+def test_an_order_beyond_the_horizon_rule_names_the_horizons_not_the_length():
+    """Order 44 on 2000 samples of one input and output: the automatic past horizon is capped by
+    its rule (2 (L + 1) = 22 with L = 10), not by the record, so a longer record would not help:
+    the error names the horizons to give (it said 'use a longer record')."""
+    rng = np.random.default_rng(0)
+    u = rng.standard_normal((2000, 1))
+    y = dlsim(0.5 * A3[:2, :2], B3[:2, :1], C3[:1, :2], u) + 0.01 * rng.standard_normal((2000, 1))
+    with pytest.raises(ValueError, match=r"^order=44 needs future_horizon >= 44 and past_horizon >= 23"):
+        dsr_e(u, y, 0.008, order=44)

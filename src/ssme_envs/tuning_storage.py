@@ -16,6 +16,7 @@ from typing import Any
 # last line still unfinished after UNFINISHED_WAIT s (Optuna appends a batch in one locked write)
 # was cut off.
 RECORD_START = re.compile(rb'^\{"op_code": ?')
+RECORD_OPENINGS = (b'{"op_code":', b'{"op_code": ')  # a line cut shorter than these may be one too
 UNFINISHED_WAIT = 0.2
 
 
@@ -75,7 +76,8 @@ def _check_journal_lines(path: Path, url: str) -> None:
     with path.open("rb") as fh:
         for number, line in enumerate(fh, start=1):
             if not line.endswith(b"\n"):
-                problem = None if RECORD_START.match(line) else "not an Optuna journal record"
+                opens = RECORD_START.match(line) or any(form.startswith(line) for form in RECORD_OPENINGS)
+                problem = None if opens else "not an Optuna journal record"
                 if problem is None:
                     time.sleep(UNFINISHED_WAIT)
                     if path.stat().st_size == size:

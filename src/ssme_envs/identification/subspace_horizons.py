@@ -65,9 +65,10 @@ def past_horizon_cap(n_samples: int, m: int, p: int, future: int) -> int:
 def check_past_holds_order(n_samples: int, m: int, p: int, past: int, future: int, order: int) -> None:
     """ValueError naming the record length needed when the automatic past horizon, capped by a
     short record, has too few rows for ``order`` states (a pass would fail on the horizons, which
-    a command-line user does not set)."""
+    a command-line user does not set); where the horizon rule itself is too short for the order,
+    a longer record would not help and the pass names the horizons."""
     need = math.ceil((order + 1) / (m + p))
-    if past >= need:
+    if past >= need or max(2 * (future + 1), 10) < need:  # long enough, or the horizon rule's cap binds
         return
     fixed = future + AUTO_COLUMNS_PER_ROW * (future + 1) * (m + 2 * p)
     samples = fixed + need * (1 + AUTO_COLUMNS_PER_ROW * (m + p))
