@@ -604,6 +604,12 @@ def test_cli_identifies_a_record_in_extreme_torque_units_quietly(tmp_path, capsy
     captured = capsys.readouterr()
     assert code == 0 and captured.err == "", captured.err
     assert not caught, [str(w.message) for w in caught]
+    # work that grows with the record says its stages (a 200,000-sample record ran past two
+    # minutes behind one line): the bootstrap with its expected time, then the joint fit
+    assert re.search(r"^DSR_e: [\d.e+-]+ s; the standard errors of J, b, k: 100 bootstrap records "
+                     r"\(up to about [\d.e+-]+ s\)$", captured.out, re.M)  # fmt: skip
+    assert re.search(r"^the Bouc-Wen joint: evolutionary search, then least squares on all 2500 samples$",
+                     captured.out, re.M)  # fmt: skip
     assert (out / "frequency_response.png").stat().st_size > 10_000
     linear = NozzleModel.load(out / "model.json").linear
     for name in ("J", "b", "k"):
@@ -620,19 +626,3 @@ def test_an_angle_that_barely_moves_is_refused_by_name(strong, scale):
         ValueError, match=r"^angle moves by at most [\d.e+-]+ rad, below 1e-12 rad: .* in rad\?$"
     ):
         fit_bouc_wen(record.tau, record.beta * scale, record.dt, workers=1)
-
-
-@pytest.mark.slow
-def test_cli_says_each_stage_of_a_user_record_with_the_bootstrap_time(tmp_path, capsys, strong):
-    """Work that grows with the record (a 200,000-sample record ran past two minutes with one line
-    shown): a line before the bootstrap, with its expected time, and one before the joint fit."""
-    _, record, _ = strong
-    data = tmp_path / "bench.csv"
-    write_nozzle_record(data, NozzleRecord(record.tau, record.beta, record.dt, "tau", "beta"))
-    assert main(["identify", "nozzle", "--data", str(data), "--out", str(tmp_path / "o")]) == 0
-    out = capsys.readouterr().out
-    assert re.search(r"^DSR_e: [\d.e+-]+ s; the standard errors of J, b, k: 100 bootstrap records "
-                     r"\(up to about [\d.e+-]+ s\)$", out, re.M)  # fmt: skip
-    assert re.search(
-        r"^the Bouc-Wen joint: evolutionary search, then least squares on all 2500 samples$", out, re.M
-    )
