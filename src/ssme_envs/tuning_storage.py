@@ -6,17 +6,15 @@ from __future__ import annotations
 
 import json
 import logging
-import re
 import sys
 import time
 from pathlib import Path
 from typing import Any
 
 # A journal line opens as Optuna writes its records (json.dumps, compact or spaced); an unfinished
-# last line still unfinished after UNFINISHED_WAIT s (Optuna appends a batch in one locked write)
-# was cut off.
-RECORD_START = re.compile(rb'^\{"op_code": ?')
-RECORD_OPENINGS = (b'{"op_code":', b'{"op_code": ')  # a line cut shorter than these may be one too
+# last line (one that opens so, or is cut inside the opening) still unfinished after UNFINISHED_WAIT s
+# (Optuna appends a batch in one locked write) was cut off.
+RECORD_OPENING = b'{"op_code":'
 UNFINISHED_WAIT = 0.2
 
 
@@ -76,7 +74,7 @@ def _check_journal_lines(path: Path, url: str) -> None:
     with path.open("rb") as fh:
         for number, line in enumerate(fh, start=1):
             if not line.endswith(b"\n"):
-                opens = RECORD_START.match(line) or any(form.startswith(line) for form in RECORD_OPENINGS)
+                opens = line.startswith(RECORD_OPENING) or RECORD_OPENING.startswith(line)
                 problem = None if opens else "not an Optuna journal record"
                 if problem is None:
                     time.sleep(UNFINISHED_WAIT)

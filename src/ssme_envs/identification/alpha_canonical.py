@@ -60,7 +60,7 @@ from ssme_envs.identification.structure import (
 )
 from ssme_envs.identification.structure import estimate_indices as structure_search
 from ssme_envs.identification.structure_refined import refine_candidate, refine_contenders, walk_refined
-from ssme_envs.identification.subspace_checks import arx_innovations, check_input_directions, noise_fraction
+from ssme_envs.identification.subspace_checks import check_input_directions, record_noise
 from ssme_envs.models.statespace import AlphaCanonicalModel, AlphaStructure
 
 # Share of the record the candidate structures are fitted on; the rest scores them.
@@ -128,14 +128,6 @@ def check_record(
                     f"the {kind}s {', '.join(names)} are linearly dependent (rank-deficient record)"
                 )
     return u, y
-
-
-def _record_noise(u: np.ndarray, y: np.ndarray, past: int) -> float:
-    """The outputs' noise as a fraction of their spread, by an ARX fit of ``past`` lags on the
-    channels brought to unit peaks: on raw channels the fit's rank cut, relative to the largest
-    column, dropped inputs in units far from the outputs' and counted their response as noise."""
-    us, ys = u / np.max(np.abs(u), axis=0), y / np.max(np.abs(y), axis=0)
-    return noise_fraction(arx_innovations(us, ys, past), ys[past:])
 
 
 def estimate_indices(
@@ -245,7 +237,7 @@ def identify(
     u, y = check_record(args.u, args.y, in_names, out_names)
     names = (in_names, out_names)
     past = max(1, min(2 * max(indices or (max_index,)), u.shape[0] // (4 * (u.shape[1] + y.shape[1]))))
-    check_input_directions(u, lambda: _record_noise(u, y, past), _names(in_names, u.shape[1], "u"))
+    check_input_directions(u, lambda: record_noise(u, y, past), _names(in_names, u.shape[1], "u"))
 
     search = None
     if indices is None:

@@ -62,7 +62,7 @@ from ssme_envs.identification.subspace_bic import bic_order, realize
 from ssme_envs.identification.subspace_checks import (
     arx_innovations,
     check_input_directions,
-    noise_fraction,
+    record_noise,
     unstable,
 )
 from ssme_envs.identification.subspace_horizons import (
@@ -329,7 +329,7 @@ def dsr_e(
         )
 
     u, y, scales = equilibrated(u, y)
-    check_input_directions(u, lambda: noise_fraction(arx_innovations(u, y, past), y[past:]))
+    check_input_directions(u, lambda: record_noise(u, y, past))
 
     def one_pass(past: int, future: int) -> tuple[InnovationsModel, np.ndarray, int, bool]:
         return _identify_once(u, y, dt, past, future, order, max_order)

@@ -114,6 +114,15 @@ def arx_innovations(u: np.ndarray, y: np.ndarray, past: int) -> np.ndarray:
     return y[past:] - phi @ theta
 
 
+def record_noise(u: np.ndarray, y: np.ndarray, past: int) -> float:
+    """The outputs' noise as a fraction of their spread (:func:`noise_fraction`) from the ARX
+    innovations of ``past`` lags, fitted on the channels brought to unit peaks: on raw channels
+    the fit's rank cut, relative to the largest column, dropped inputs in units far from the
+    outputs' and counted their response as noise (69 % for 0.1 %)."""
+    us, ys = u / np.max(np.abs(u), axis=0), y / np.max(np.abs(y), axis=0)
+    return noise_fraction(arx_innovations(us, ys, past), ys[past:])
+
+
 def noise_fraction(e: np.ndarray, y: np.ndarray) -> float:
     """The outputs' noise as a fraction of their spread: the largest over the outputs of the norm
     of the innovations estimate ``e`` over that of the output ``y`` (same samples) less its mean."""
@@ -159,5 +168,6 @@ __all__ = [
     "most_predictive",
     "noise_fraction",
     "prediction_criterion",
+    "record_noise",
     "unstable",
 ]

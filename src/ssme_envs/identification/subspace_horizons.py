@@ -68,10 +68,9 @@ def check_past_holds_order(n_samples: int, m: int, p: int, past: int, future: in
     a command-line user does not set); where the horizon rule itself is too short for the order,
     a longer record would not help and the pass names the horizons."""
     need = math.ceil((order + 1) / (m + p))
-    if past >= need or max(2 * (future + 1), 10) < need:  # long enough, or the horizon rule's cap binds
+    if past >= need or rule_past(future) < need:  # long enough, or the horizon rule's cap binds
         return
-    fixed = future + AUTO_COLUMNS_PER_ROW * (future + 1) * (m + 2 * p)
-    samples = fixed + need * (1 + AUTO_COLUMNS_PER_ROW * (m + p))
+    samples = samples_needed(m, p, need, future, AUTO_COLUMNS_PER_ROW)  # where past_horizon_cap reaches it
     raise ValueError(
         f"the record has {n_samples} samples; {order} states need a past horizon of {need}, which the "
         f"automatic horizons (future horizon {future}) reach from {samples} samples on: use a longer record"
@@ -83,9 +82,14 @@ def default_future(max_order: int, p: int) -> int:
     return max(math.ceil(max_order / p), 2)
 
 
+def rule_past(future: int) -> int:
+    """The automatic first past horizon's rule, ``J = max(2 (L + 1), 10)``, before the record's cap."""
+    return max(2 * (future + 1), 10)
+
+
 def default_past(n_samples: int, m: int, p: int, future: int) -> int:
-    """The automatic first past horizon ``J = max(2 (L + 1), 10)``, capped (at least 1)."""
-    return min(max(2 * (future + 1), 10), max(past_horizon_cap(n_samples, m, p, future), 1))
+    """The automatic first past horizon :func:`rule_past`, capped by the record (at least 1)."""
+    return min(rule_past(future), max(past_horizon_cap(n_samples, m, p, future), 1))
 
 
 def refined_fit(
