@@ -61,6 +61,15 @@ def _needs_data(args: argparse.Namespace, flags: tuple[str, ...], embedded: str)
             raise ValueError(f"--{flag} needs --data (the embedded {embedded} sets its own)")
 
 
+def _least_squares_note(model: Any, where: str) -> None:
+    """Print a note where method "iv" kept the least-squares estimate of ``model`` (its
+    uncertainty says so), naming the model by ``where``."""
+    from ssme_envs.identification.covariance import least_squares_kept, least_squares_note
+
+    if model.uncertainty is not None and least_squares_kept(model.uncertainty.method):
+        print(least_squares_note(where))
+
+
 def identify_engine(args: argparse.Namespace) -> int:
     """``ssme-envs identify engine``: the embedded experiment, or a record from --data."""
     from ssme_envs import pipelines
@@ -97,6 +106,7 @@ def identify_engine(args: argparse.Namespace) -> int:
                 f"lambda {[round(float(v), 4) for v in r.identified.model.lam]}, model SEE on the "
                 f"low-frequency test {[round(v, 4) for v in see]}"
             )
+            _least_squares_note(r.identified.model, f"{r.power_percent} % power")
         print(f"identified {len(run.levels)} power levels in {run.seconds:.2f} s; report: {run.report}")
         return 0
     model = run.identified.model
@@ -108,6 +118,7 @@ def identify_engine(args: argparse.Namespace) -> int:
     )
     from ssme_envs.identification.metrics import fit_warning
 
+    _least_squares_note(model, "the model")
     warning = fit_warning(model, run.validation["identification"]["model"]["fit_percent"])
     if warning is not None:
         print(warning)

@@ -64,18 +64,35 @@ def theta_covariance_factor(
     return bread @ root * np.sqrt(n / max(n - k / len(phis), 1))
 
 
+# what ``kept_estimator`` says where method "iv" kept least squares; its opening identifies it
+LEAST_SQUARES_KEPT = (
+    "least squares (kept: no instrumental-variable pass simulated the record better; biased "
+    "under white output noise, so the intervals may under-cover: method 'oe' corrects both)"
+)
+
+
 def kept_estimator(fit: _Fit, method: str) -> str:
     """The estimator whose estimate ``fit`` holds, in words: for ``method="iv"`` least squares
     where no instrumental-variable pass simulated the record better (least squares is biased under
     white output noise, which its intervals do not cover)."""
     if fit.instruments is not fit.phis:
         return "instrumental variables"
-    if method == "iv":
-        return (
-            "least squares (kept: no instrumental-variable pass simulated the record better; biased "
-            "under white output noise, so the intervals may under-cover: method 'oe' corrects both)"
-        )
-    return "least squares"
+    return LEAST_SQUARES_KEPT if method == "iv" else "least squares"
+
+
+def least_squares_kept(uncertainty_method: str) -> bool:
+    """Whether a model's ``uncertainty.method`` text says that method "iv" kept least squares."""
+    return uncertainty_method.startswith(LEAST_SQUARES_KEPT)
+
+
+def least_squares_note(where: str) -> str:
+    """A console line saying that method "iv" kept least squares for the model of ``where``, and
+    what follows for its estimate and intervals."""
+    return (
+        f"note: {where}: no instrumental-variable pass simulated the record better, so the estimate "
+        "is least squares', biased under white output noise, and its intervals may under-cover: "
+        "--method oe corrects both"
+    )
 
 
 def parameter_uncertainty(fit: _Fit, y: np.ndarray, method: str) -> ParameterUncertainty:

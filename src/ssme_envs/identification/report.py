@@ -71,6 +71,22 @@ def structure_table(search) -> list[str]:
     return lines
 
 
+def covariance_lines(results: list[LevelResult]) -> list[str]:
+    """What the levels' standard errors come from (each model's ``uncertainty.method``: once where
+    every level has the same, else level by level); where method "iv" kept least squares, that
+    text says so and what follows (biased, intervals that may under-cover)."""
+    lead = (
+        "Estimate and standard error of each free parameter (`model_<power>.json` holds the full "
+        "covariance; published values beside them in the first table above)"
+    )
+    groups: dict[str, list[int]] = {}
+    for r in results:
+        groups.setdefault(r.identified.model.uncertainty.method, []).append(r.power_percent)
+    if len(groups) == 1:
+        return [f"{lead}: {next(iter(groups))}."]
+    return [f"{lead}:", "", *(f"- {', '.join(f'{p} %' for p in ps)}: {text}." for text, ps in groups.items())]
+
+
 def _fmt_matrix(mat: np.ndarray) -> str:
     return "<br>".join("[" + ", ".join(f"{v:.4f}" for v in row) + "]" for row in np.atleast_2d(mat))
 
@@ -250,15 +266,17 @@ def write_default_report(out_dir: Path, results: list[LevelResult], seed: int, t
         "",
         "## Parameter uncertainty",
         "",
-        "Estimate and standard error of each free parameter (the regression's sandwich covariance, "
-        "delta method; `model_<power>.json` holds the full covariance). Published values beside them "
-        "in the first table above.",
-        "",
-        "| parameter | " + " | ".join(f"{p} %" for p in powers) + " |",
-        "|---|" + "---|" * len(powers),
     ]
     models = [r.identified.model for r in results]
-    if all(m.uncertainty is not None for m in models):
+    if any(m.uncertainty is None for m in models):
+        lines.append("A model carries no parameter covariance.")
+    else:
+        lines += [
+            *covariance_lines(results),
+            "",
+            "| parameter | " + " | ".join(f"{p} %" for p in powers) + " |",
+            "|---|" + "---|" * len(powers),
+        ]
         names = models[0].parameter_names()
         table = [parameter_estimates(m) for m in models]
         for name in names:
