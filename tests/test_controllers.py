@@ -212,6 +212,23 @@ def test_a_shipped_policy_name_that_is_also_a_run_directory_here_is_refused(tmp_
     assert callable(parse_controller("ppo:identified", TRACKING))
 
 
+def test_a_design_a_later_scenario_rules_out_fails_before_any_rollout():
+    """The controllers were designed before the rollouts on the first scenario's env only: a
+    design that a later scenario's env rules out (here a factory refusing the ramp reference)
+    failed after the earlier scenarios had run. Now each is designed on every scenario's env first."""
+
+    def picky(env):
+        if env.task.reference == "ramp":
+            raise ValueError("this design cannot follow a ramp")
+        return make_controller("zero", env)
+
+    said: list[str] = []
+    factories = {"zero": parse_controller("zero", TRACKING), "picky": picky}
+    with pytest.raises(ValueError, match="cannot follow a ramp"):
+        evaluate(TRACKING, factories, ["pc_step", "ramp"], 1, progress=said.append)
+    assert said == []
+
+
 def test_a_controller_the_options_rule_out_fails_before_any_rollout(tmp_path):
     """An engine plant of our own with dt 0.02 s: the controllers designed on the identified model
     (dt 0.04 s) cannot be; the error came after the controllers before it had run their episodes

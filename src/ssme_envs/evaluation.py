@@ -345,15 +345,17 @@ def evaluate(
     episodes = positive_int("episodes", episodes)
     check_factories(controllers)
     names = scenario_names(env_id) if scenarios is None else check_scenarios(env_id, scenarios)
-    for scenario in names:  # every scenario takes the options, before any work (a few ms each)
+    # Before any rollout, every scenario takes the options and every controller is designed on
+    # each scenario's env (a few ms each; designs are cached): a scenario or a design the options
+    # rule out fails first, not midway through the run.
+    for scenario in names:
         try:
-            make_env(env_id, scenario, 1, options).close()
+            env = make_env(env_id, scenario, 1, options)
         except ValueError as exc:
             raise ValueError(f"scenario {scenario!r}: {exc}") from None
-    for factory in controllers.values():  # each designed once before any rollout: a design the
-        env = make_env(env_id, names[0], 1, options)  # options rule out fails first, not midway
         try:
-            factory(env)
+            for factory in controllers.values():
+                factory(env)
         finally:
             env.close()
     say = progress or (lambda _: None)
