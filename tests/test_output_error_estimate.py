@@ -174,6 +174,15 @@ def test_the_command_line_offers_the_library_methods_and_defaults() -> None:
         assert options[name].default == defaults[name].default
 
 
+def test_the_max_index_help_gives_the_walks_largest_order() -> None:
+    """The CLI's help writes the walk's bound as a number (it does not import identification)."""
+    from ssme_envs.identification.structure import MAX_WALK_ORDER
+
+    engine = _subparser(_subparser(build_parser(), "identify"), "engine")
+    (option,) = [a for a in engine._actions if a.dest == "max_index"]
+    assert f"to {MAX_WALK_ORDER} states in all" in option.help
+
+
 def _subparser(parser: argparse.ArgumentParser, name: str) -> argparse.ArgumentParser:
     (commands,) = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
     return commands.choices[name]

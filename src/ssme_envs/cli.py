@@ -105,7 +105,7 @@ def build_parser() -> argparse.ArgumentParser:
         type=integer,
         default=6,
         help="largest index of the rank search; the walk over neighbouring sets may go past it, "
-        "to 12 states in all (default: %(default)s)",
+        "to 12 states in all (default: %(default)s)",  # identification.structure.MAX_WALK_ORDER
     )
     engine.add_argument(
         "--rank-tol", type=number, default=0.1, help="rank-search threshold (default: %(default)s)"
