@@ -86,6 +86,33 @@ def test_an_input_that_never_changes_sign_is_refused_as_such(offset, column, sig
     np.testing.assert_allclose(model.markov_parameters(8), truth.markov_parameters(8), atol=1e-6)
 
 
+def test_an_output_offset_that_drives_lambda_out_of_range_is_refused_by_name():
+    """Outputs not given as deviations from the operating point: with a two-level input lambda
+    is read from the outputs' means (eq 42), and an offset of 0.05 on Table I's 100 % record
+    (scipy's simulation) gave lambda 4.4, written to a model.json its own loader refuses."""
+    u, y = _record(0.0, 0, seed=2)
+    with pytest.raises(
+        ValueError, match=r"^input 'u0': the identified lambda is 4\.\d+, outside \(0, 2\).*offset"
+    ):
+        identify(u, y + 0.05, 0.04)
+
+
+@settings(max_examples=12, deadline=None)
+@given(offset=st.floats(-0.05, 0.05), method=st.sampled_from(["iv", "ls", "oe"]))
+def test_an_identified_model_is_one_its_loader_takes(offset, method):
+    """Whatever offset the outputs carry, identify refuses by name or returns a model that
+    model.json round-trips (lambda in (0, 2))."""
+    u, y = _record(0.0, 0, seed=5)
+    y = y + offset + np.random.default_rng(6).normal(0.0, 1e-4, y.shape)
+    try:
+        model = identify(u, y, 0.04, indices=(2, 2), method=method).model
+    except ValueError as exc:
+        assert re.match(r"input 'u\d': the identified lambda is .*, outside \(0, 2\)", str(exc)), exc
+        return
+    back = engine_model_from_dict(AlphaCanonicalModel, json.loads(json.dumps(engine_model_to_dict(model))))
+    np.testing.assert_array_equal(back.lam, model.lam)
+
+
 @pytest.mark.parametrize("indices", [(9_999_999, 1), (200, 200), (2,), (2, 2, 2), (0, 2), (2.0, 2)])
 def test_indices_that_the_record_cannot_fit_are_refused(indices):
     u, y = _record(0.0, 0, seed=2)

@@ -159,6 +159,27 @@ def estimate_indices(
     return structure_search(_input_features(u, gamma, asymmetric), y, max_index, rank_tol, output_names)
 
 
+def check_gains(model: AlphaCanonicalModel, binary: np.ndarray, input_names: Sequence[str]) -> None:
+    """Refuse an identified lambda outside (0, 2), where one side's valve gain changes sign (the
+    model files refuse it too), saying why it can come out there: for a two-level input
+    (``binary``) lambda is read from the outputs' means (eq 42), which an output offset moves."""
+    outside = np.flatnonzero(~((model.lam > 0.0) & (model.lam < 2.0)))
+    if not outside.size:
+        return
+    j = int(outside[0])
+    why = (
+        "a two-level input's lambda is read from the outputs' means (eq 42), so outputs measured "
+        "with an offset from the operating point move it: subtract each output's operating-point "
+        "value, or identify without the asymmetric gains (--symmetric)"
+        if binary[j]
+        else "identify without the asymmetric gains (--symmetric), or check the input's operating point"
+    )
+    raise ValueError(
+        f"input '{input_names[j]}': the identified lambda is {model.lam[j]:.4g}, outside (0, 2), where "
+        f"the valve gain on one side of the operating point changes sign: {why}"
+    )
+
+
 def identify(
     u: np.ndarray,
     y: np.ndarray,
@@ -293,13 +314,15 @@ def identify(
     check_feedthrough(fit.model, u, y, _names(in_names, u.shape[1], "u"), _names(out_names, y.shape[1], "y"))
     if search is not None:
         fit.model.fit["structure"] = search.to_dict()
+    binary = ~np.isnan(fit.gamma)
     if method == "oe":
-        binary = ~np.isnan(fit.gamma)
         model, intercept, cov = fit_output_error(
             fit.model, fit.intercept, u, y, asymmetric, binary, uncertainty
         )
+        check_gains(model, binary, _names(in_names, u.shape[1], "u"))
         model.uncertainty = cov
         return Identification(model, search, intercept, method)
+    check_gains(fit.model, binary, _names(in_names, u.shape[1], "u"))
     if uncertainty:
         fit.model.uncertainty = parameter_uncertainty(fit, y, method)
     return Identification(fit.model, search, fit.intercept, method)
