@@ -97,6 +97,21 @@ def test_an_output_offset_that_drives_lambda_out_of_range_is_refused_by_name():
         identify(u, y + 0.05, 0.04)
 
 
+@settings(max_examples=10, deadline=None)
+@given(offset=hnp.arrays(np.float64, 2, elements=st.floats(-0.002, 0.002)))
+def test_an_output_offset_moves_lambda_as_the_steady_state_gain_says(offset):
+    """With a two-level input of amplitude gamma, u* = u + (lambda - 1) gamma: an output offset c
+    reads as the constant input G(1)^-1 c, G(1) = C (I - A)^-1 B the truth's steady-state gain
+    (numpy's solve), so lambda moves by G(1)^-1 c / gamma (README: 0.001 on both outputs takes
+    lambda_OPOV from 0.86 to 0.93)."""
+    truth = published_model(100)
+    u, y = _record(0.0, 0, seed=5)
+    gain = truth.C @ np.linalg.solve(np.eye(truth.n_states) - truth.A, truth.B)
+    expected = truth.lam + np.linalg.solve(gain, offset) / 0.01
+    model = identify(u, y + offset, 0.04, indices=(2, 2), uncertainty=False).model
+    np.testing.assert_allclose(model.lam, expected, atol=1e-6)
+
+
 @settings(max_examples=12, deadline=None)
 @given(offset=st.floats(-0.05, 0.05), method=st.sampled_from(["iv", "ls", "oe"]))
 def test_an_identified_model_is_one_its_loader_takes(offset, method):
