@@ -148,6 +148,12 @@ def standard_error_row(ident: NozzleIdentification) -> str:
     return f"| standard error (bootstrap) | {se['J']:.2g} | {se['b']:.2g} | {se['k']:.2g} | | | | | |"
 
 
+def bias_text(bias: dict[str, float], key: str) -> str:
+    """The simulated acquisition bias as the report gives it (estimate minus truth, what the
+    corrected values had subtracted), naming the model.json entry ``key`` that holds it."""
+    return "bias " + ", ".join(f"{name} {value:+.4g}" for name, value in bias.items()) + f", `{key}`"
+
+
 def _uncertainty_note(ident: NozzleIdentification) -> list[str]:
     boot = ident.linear_uncertainty
     bias = ident.model.fit["dsr_e"].get("acquisition_bias")
@@ -155,9 +161,9 @@ def _uncertainty_note(ident: NozzleIdentification) -> list[str]:
     if bias is not None:
         lines += [
             "J, b, k are corrected for the bench's acquisition chain (anti-alias FIR filter and "
-            "decimation by 20), whose bias at the estimate was simulated: "
-            + ", ".join(f"{key} {-value:+.4g}" for key, value in bias.items())
-            + " (`acquisition_bias`); the DSR_e state-space model is what the data give.",
+            "decimation by 20): its bias at the estimate, simulated, is subtracted "
+            f"({bias_text(bias, 'fit.dsr_e.acquisition_bias')}); the DSR_e state-space model is what "
+            "the data give.",
             "",
         ]
     if boot is None:
@@ -206,11 +212,10 @@ def _bouc_wen_section(bw: BoucWenFit, bias: dict[str, float] | None = None) -> l
             []
             if bias is None
             else [
-                "The values are corrected for the bench's acquisition chain, whose bias at the estimate "
-                "was simulated (the fitted joint at the bench rate, acquired without noise and fitted "
-                "again): "
-                + ", ".join(f"{key} {-value:+.4g}" for key, value in bias.items())
-                + " (`bouc_wen_acquisition_bias`); the standard errors are the noise's.",
+                "The values are corrected for the bench's acquisition chain: its bias at the estimate, "
+                "simulated (the fitted joint at the bench rate, acquired without noise and fitted "
+                f"again), is subtracted ({bias_text(bias, 'fit.bouc_wen.acquisition_bias')}); the standard "
+                "errors are the noise's.",
                 "",
             ]
         ),
