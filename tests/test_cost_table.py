@@ -86,3 +86,41 @@ def test_the_shipped_report_plan_has_no_unexplained_classical_controller():
         names = [s for s in specs.split(",") if not s.startswith("ppo")]
         result = evaluate(env_id, {n: parse_controller(n, env_id) for n in names}, scenarios, episodes=4)
         assert unexplained(result) == [], env_id
+
+
+def test_a_policys_fault_cause_comes_from_its_own_training_config():
+    """The stuck valve's causes for the shipped policies were one written text, which called
+    `ppo:identified` trained on the truth; now each is read from the policy's config.toml (the
+    identified plant for that one) and a residual's names its base design's cost here."""
+    import tomllib
+
+    from agents.shipped import shipped_specs
+    from ssme_envs.main_report import TRACKING
+
+    result = EvaluationResult(TRACKING)
+    rows = {"zero": _metrics(40.0), "lqi": _metrics(60.0)}
+    rows |= {name: _metrics(50.0) for name in ("ppo", "ppo:identified", "ppo:residual")}
+    result.scenarios["stuck_valve"] = rows
+    lines = {
+        line.split(" on ")[0][2:]: line
+        for line in cost_over_zero_tables({TRACKING: result})
+        if line[:2] == "- "
+    }
+    specs = shipped_specs(TRACKING)
+    for name in ("ppo", "ppo:identified", "ppo:residual"):
+        config = tomllib.loads((specs[name] / "config.toml").read_text())
+        assert "fault" not in config.get("env_options", {})
+        assert f"agents/policies/{specs[name].name}/config.toml" in lines[name]
+        assert "never met a stuck valve" in lines[name]
+    assert 'plant = "identified"' in lines["ppo:identified"]
+    assert "plant" not in lines["ppo"].split("config.toml")[1]
+    assert "a correction to `lqi`, which costs 1.50x the zero action here" in lines["ppo:residual"]
+
+
+@pytest.mark.parametrize(
+    ("zero", "cost", "cell"), [(40.0, 0.168, "0.0042"), (40.0, 2.6, "0.065"), (40.0, 10.0, "0.25")]
+)
+def test_small_ratios_keep_two_significant_digits(zero, cost, cell):
+    """Two decimals printed the nozzle's ratio 0.0042 as 0.00."""
+    lines = cost_over_zero_tables({THROTTLE: _result({"zero": _metrics(zero), "fast": _metrics(cost)})})
+    assert f"| made_up | {zero:.3f} | {cell} |" in lines

@@ -42,15 +42,6 @@ _STRONG_PID = (
     "reference peaks below 3 deg and leaves the +-6 deg envelope; on the same joint's linear twin "
     "it stays inside"
 )
-_PPO_FAULT = (
-    "trained on the fault-free truth (experiments/configs/ppo_engine_tracking.toml sets no fault): "
-    "it has never seen a stuck valve"
-)
-_RESIDUAL_FAULT = (
-    "a correction to the LQ servo, which costs more than the zero action here (its cause above), "
-    "trained on the fault-free truth (experiments/configs/ppo_engine_tracking_residual*.toml): it "
-    "has never seen a stuck valve"
-)
 _MISSIONS = ("mission", "mission_noise_off", "mission_linear", "mission_nonlinear")
 # (env, scenario, controller) -> why it costs more than the zero action, found by runs of the
 # scenario (rollouts, the linear loop's eigenvalues); the measured lines come with it
@@ -58,8 +49,6 @@ WRITTEN_CAUSES: dict[tuple[str, str, str], str] = {
     **{(THROTTLE, s, "pi"): _PI_COUPLING for s in _MISSIONS},
     **{(TRACKING, s, c): _PI_BUCKET for s in ("bucket", "nonlinear_bucket") for c in ("pi", "pi:truth")},
     **{(TRACKING, "stuck_valve", c): _STUCK_COUPLED for c in ("lqi", "lqi:truth", "lq:truth")},
-    **{(TRACKING, "stuck_valve", c): _PPO_FAULT for c in ("ppo", "ppo:identified")},
-    **{(TRACKING, "stuck_valve", c): _RESIDUAL_FAULT for c in ("ppo:residual", "ppo:residual_quiet")},
     (NOZZLE, "sine_sweep_strong", "pid"): _STRONG_PID,
 }
 SATURATED = 0.05  # time at the limit (share) from which it is named as a cause
@@ -91,6 +80,52 @@ def measured_causes(metrics: ControllerMetrics, unit: str) -> list[str]:
     return causes
 
 
+def _options_text(options: dict) -> str:
+    """Env options as TOML writes them inline: ``plant = "identified", truth = {backlash = 0.0}``."""
+
+    def value(v: object) -> str:
+        if isinstance(v, dict):
+            return "{" + _options_text(v) + "}"
+        if isinstance(v, bool):
+            return str(v).lower()
+        return f'"{v}"' if isinstance(v, str) else repr(v)
+
+    return ", ".join(f"{k} = {value(v)}" for k, v in options.items())
+
+
+def training_cause(results: EvaluationResult, scenario: str, controller: str) -> str | None:
+    """Why a shipped policy may not cope with a scenario's fault, read from its training config
+    (``config.toml`` beside the policy): the env options it was trained with, where they set no
+    fault, and for a residual policy its base design's cost here. None for other controllers and
+    scenarios."""
+    from ssme_envs.evaluation import SCENARIOS
+
+    fault = SCENARIOS.get(results.env_id, {}).get(scenario, {}).get("fault")
+    if fault is None or controller.split(":")[0] not in LEARNED:
+        return None
+    from agents.run_config import load_config
+    from agents.shipped import shipped_specs
+
+    directory = shipped_specs(results.env_id).get(controller)
+    if directory is None:  # a run of the user's: its options are not ours to read
+        return None
+    config = load_config(directory / "config.toml")
+    options = config.get("env_options", {})
+    if "fault" in options:
+        return None
+    trained = _options_text(options) or "the env's defaults"
+    said = (
+        f"trained without faults (agents/policies/{directory.name}/config.toml: {trained}): it has never "
+        f"met a {fault['kind'].replace('_', ' ')}"
+    )
+    base = config.get("residual")
+    rows = results[scenario]
+    if base is None or base not in rows or "zero" not in rows:
+        return said
+    share = rows[base].cost_mean / rows["zero"].cost_mean
+    return f"a correction to `{base}`, which costs {share:.2f}x the zero action here; {said}"
+
+
 def _worse_tracking(metrics: ControllerMetrics, zero: ControllerMetrics) -> str:
     """The outputs tracked worse than with no action, as ISE ratios (a symptom, not a cause)."""
     worse = [
@@ -99,6 +134,12 @@ def _worse_tracking(metrics: ControllerMetrics, zero: ControllerMetrics) -> str:
         if name in zero.outputs and zero.outputs[name].ise > 0 and out.ise > zero.outputs[name].ise
     ]
     return f" ({', '.join(worse)})" if worse else ""
+
+
+def ratio_text(ratio: float) -> str:
+    """A cost ratio for the tables: two decimals, or two significant digits below 0.1 (where two
+    decimals left most of the nozzle's cells at 0.00)."""
+    return f"{ratio:.2f}" if ratio >= 0.1 else f"{ratio:.2g}"
 
 
 def over_zero(results: EvaluationResult) -> dict[tuple[str, str], float]:
@@ -149,7 +190,7 @@ def cost_over_zero_tables(evaluations: dict[str, EvaluationResult]) -> list[str]
         lines += [f"#### {env_id}", "", "| scenario | zero's cost | " + " | ".join(names) + " |"]
         lines.append("|---" * (len(names) + 2) + "|")
         for scenario, rows in results.items():
-            cells = [f"{ratios[(scenario, c)]:.2f}" if (scenario, c) in ratios else "-" for c in names]
+            cells = [ratio_text(ratios[(scenario, c)]) if (scenario, c) in ratios else "-" for c in names]
             zero = f"{rows['zero'].cost_mean:.3f}" if "zero" in rows else "-"
             lines.append(f"| {scenario} | {zero} | " + " | ".join(cells) + " |")
         above = [(s, c, r) for (s, c), r in ratios.items() if r > 1.0]
@@ -157,7 +198,7 @@ def cost_over_zero_tables(evaluations: dict[str, EvaluationResult]) -> list[str]
         for scenario, name, ratio in above:
             m = results[scenario][name]
             causes = measured_causes(m, unit)
-            written = WRITTEN_CAUSES.get((env_id, scenario, name))
+            written = WRITTEN_CAUSES.get((env_id, scenario, name)) or training_cause(results, scenario, name)
             said = "; ".join(causes + ([written] if written else []))
             if not said:
                 said = (
@@ -257,5 +298,7 @@ __all__ = [
     "learned_over_classical_tables",
     "measured_causes",
     "over_zero",
+    "ratio_text",
+    "training_cause",
     "unexplained",
 ]
