@@ -1,129 +1,22 @@
-"""The main report's table of each controller's cost over the zero action, and why a classical
-controller costs more than doing nothing: causes measured by the metrics, or written down from
-runs of the scenario."""
+"""The main report's table of each controller's cost over the zero action, with why each controller
+above it costs more than doing nothing (:mod:`ssme_envs.report_causes`), and of the best learned
+policy against the best classical design."""
 
 from __future__ import annotations
 
-import math
-
 from ssme_envs.evaluation_result import ControllerMetrics, EvaluationResult
-
-TRACKING = "ssme_envs/EngineTracking-v0"
-THROTTLE = "ssme_envs/EngineThrottle-v0"
-NOZZLE = "ssme_envs/NozzleTVC-v0"
-LAUNCHER = "ssme_envs/LauncherPitch-v0"
-
-# learned controllers: their names before the colon; everything else but `zero` is classical
-LEARNED = ("ppo", "sac", "td3")
-_PI_COUPLING = (
-    "its SIMC gains, tuned loop by loop on the 100 % model with the cross-coupling ignored, leave "
-    "each loop alone stable at every power, but the coupled linear loop unstable at the mission's "
-    "low-power levels (closed-loop spectral radius above 1 on the linked model at 90 % and below): "
-    "the oscillation grows until FPOV hits its limit, on the linear plant as on the truth; "
-    "`pi_scheduled` (each level's gains detuned until the coupled loop is stable) and the "
-    "`scheduled` servo are the engineer's answers"
+from ssme_envs.report_causes import (
+    LAUNCHER,
+    LEARNED,
+    NOZZLE,
+    SATURATED,
+    THROTTLE,
+    TRACKING,
+    WRITTEN_CAUSES,
+    is_classical,
+    measured_causes,
+    written_cause,
 )
-_PI_BUCKET = (
-    "at 67 % the SIMC gains, tuned loop by loop with the cross-coupling ignored, close an unstable "
-    "coupled loop (spectral radius 1.02 with the gains tuned on the identified 70 % model, 1.06 with "
-    "those tuned on the truth at 67 %): the oscillation grows until FPOV hits its limit; tuning at "
-    "the operating point does not cure it, detuning does (EngineThrottle's `pi_scheduled`)"
-)
-_STUCK_COUPLED = (
-    "once OPOV sticks (at 4 s) its coupled gain still sets FPOV as if OPOV answered, so FPOV chases "
-    "the Pc error along its own direction and drives MR away: after the fault both errors exceed "
-    "the untracked references'. Integral windup is not the cause: `lq:truth`, with negligible "
-    "integral action and OPOV rarely at its limit, costs as much. The decoupled PI (FPOV on MR "
-    "alone) stays below the zero action"
-)
-_STRONG_PID = (
-    "on the strong joint, which yields past about 1.7 deg, the PID (placed on the small-signal "
-    "stiffness, no reference feedforward) overshoots at the sweep's fast end to 5-6 deg where the "
-    "reference peaks below 3 deg and leaves the +-6 deg envelope; on the same joint's linear twin "
-    "it stays inside"
-)
-_MISSIONS = ("mission", "mission_noise_off", "mission_linear", "mission_nonlinear")
-# (env, scenario, controller) -> why it costs more than the zero action, found by runs of the
-# scenario (rollouts, the linear loop's eigenvalues); the measured lines come with it
-WRITTEN_CAUSES: dict[tuple[str, str, str], str] = {
-    **{(THROTTLE, s, "pi"): _PI_COUPLING for s in _MISSIONS},
-    **{(TRACKING, s, c): _PI_BUCKET for s in ("bucket", "nonlinear_bucket") for c in ("pi", "pi:truth")},
-    **{(TRACKING, "stuck_valve", c): _STUCK_COUPLED for c in ("lqi", "lqi:truth", "lq:truth")},
-    (NOZZLE, "sine_sweep_strong", "pid"): _STRONG_PID,
-}
-SATURATED = 0.05  # time at the limit (share) from which it is named as a cause
-
-
-def is_classical(controller: str) -> bool:
-    """Whether a controller spec names a classical design (not `zero`, not a learned policy)."""
-    return controller != "zero" and controller.split(":")[0] not in LEARNED
-
-
-def measured_causes(metrics: ControllerMetrics, unit: str) -> list[str]:
-    """What the metrics show that raises a cost: early ends, limit cycles, actuators at their
-    limits (``unit``: the outputs' unit)."""
-    causes = []
-    if metrics.terminations:
-        causes.append(
-            f"ended early in {metrics.terminations} of {metrics.episodes} episodes (each charged the "
-            "cost of the steps it had left)"
-        )
-    for name, out in metrics.outputs.items():
-        if math.isfinite(out.limit_cycle_fraction) and out.limit_cycle_fraction > 0:
-            causes.append(
-                f"limit cycle in {100 * out.limit_cycle_fraction:.0f} % of episodes "
-                f"({out.limit_cycle_period:.2f} s, +-{out.limit_cycle_amplitude:.2g} {unit} {name})"
-            )
-    for name, act in metrics.actuators.items():
-        if act.time_at_limit >= SATURATED:
-            causes.append(f"{name} at its limit {100 * act.time_at_limit:.0f} % of the time")
-    return causes
-
-
-def _options_text(options: dict) -> str:
-    """Env options as TOML writes them inline: ``plant = "identified", truth = {backlash = 0.0}``."""
-
-    def value(v: object) -> str:
-        if isinstance(v, dict):
-            return "{" + _options_text(v) + "}"
-        if isinstance(v, bool):
-            return str(v).lower()
-        return f'"{v}"' if isinstance(v, str) else repr(v)
-
-    return ", ".join(f"{k} = {value(v)}" for k, v in options.items())
-
-
-def training_cause(results: EvaluationResult, scenario: str, controller: str) -> str | None:
-    """Why a shipped policy may not cope with a scenario's fault, read from its training config
-    (``config.toml`` beside the policy): the env options it was trained with, where they set no
-    fault, and for a residual policy its base design's cost here. None for other controllers and
-    scenarios."""
-    from ssme_envs.evaluation import SCENARIOS
-
-    fault = SCENARIOS.get(results.env_id, {}).get(scenario, {}).get("fault")
-    if fault is None or controller.split(":")[0] not in LEARNED:
-        return None
-    from agents.run_config import load_config
-    from agents.shipped import shipped_specs
-
-    directory = shipped_specs(results.env_id).get(controller)
-    if directory is None:  # a run of the user's: its options are not ours to read
-        return None
-    config = load_config(directory / "config.toml")
-    options = config.get("env_options", {})
-    if "fault" in options:
-        return None
-    trained = _options_text(options) or "the env's defaults"
-    said = (
-        f"trained without faults (agents/policies/{directory.name}/config.toml: {trained}): it has never "
-        f"met a {fault['kind'].replace('_', ' ')}"
-    )
-    base = config.get("residual")
-    rows = results[scenario]
-    if base is None or base not in rows or "zero" not in rows:
-        return said
-    share = rows[base].cost_mean / rows["zero"].cost_mean
-    return f"a correction to `{base}`, which costs {share:.2f}x the zero action here; {said}"
 
 
 def _worse_tracking(metrics: ControllerMetrics, zero: ControllerMetrics) -> str:
@@ -198,7 +91,7 @@ def cost_over_zero_tables(evaluations: dict[str, EvaluationResult]) -> list[str]
         for scenario, name, ratio in above:
             m = results[scenario][name]
             causes = measured_causes(m, unit)
-            written = WRITTEN_CAUSES.get((env_id, scenario, name)) or training_cause(results, scenario, name)
+            written = written_cause(results, scenario, name)
             said = "; ".join(causes + ([written] if written else []))
             if not said:
                 said = (
@@ -299,6 +192,5 @@ __all__ = [
     "measured_causes",
     "over_zero",
     "ratio_text",
-    "training_cause",
     "unexplained",
 ]
