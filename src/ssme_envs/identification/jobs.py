@@ -86,7 +86,7 @@ def engine_embedded_into(work: Path, seed: int | None, options: dict[str, Any]) 
         f"valve backlash {config.backlash:g}, valve stiction {config.stiction:g} and sensor noise "
         f"(std {list(config.sensor_noise)}) in front of and behind it (normalized units; our assumptions)"
     )
-    return results, report.write_default_report(work, results, seed, note)
+    return results, report.write_default_report(work, results, seed, note, config.backlash)
 
 
 def identify_engine(
