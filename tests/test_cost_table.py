@@ -124,3 +124,40 @@ def test_small_ratios_keep_two_significant_digits(zero, cost, cell):
     """Two decimals printed the nozzle's ratio 0.0042 as 0.00."""
     lines = cost_over_zero_tables({THROTTLE: _result({"zero": _metrics(zero), "fast": _metrics(cost)})})
     assert f"| made_up | {zero:.3f} | {cell} |" in lines
+
+
+def _nozzle(iae: dict[str, float], ended: int = 0) -> dict[str, ControllerMetrics]:
+    """The nozzle table's three controllers with the given angle IAEs; ``ended`` PID episodes
+    ended early."""
+    return {
+        c: ControllerMetrics(
+            20,
+            -1.0,
+            0.0,
+            1.0,
+            1.0,
+            ended if c == "pid" else 0,
+            {"angle": OutputMetrics(v, 1.0, 1.0, 0.0, NAN, NAN, NAN, 0.0, NAN, NAN, 3.0)},
+            {},
+        )
+        for c, v in iae.items()
+    }
+
+
+def test_the_nozzle_table_flags_early_ends_and_compares_each_scenario_with_its_own_twin():
+    """The PID's IAE on the strong joint stood unflagged though most episodes ended early (the IAE
+    stops there), and the sentence under the table named Table 1's linear row for the strong
+    joint's twin and said the rest of the gain helps either joint where it cost the twin 83 %."""
+    from ssme_envs.main_report import NOZZLE, nozzle_tables
+
+    result = EvaluationResult(NOZZLE)
+    result.scenarios["sine_sweep"] = _nozzle({"pid": 3.0, "lqi": 0.30, "hysteresis": 0.27})
+    result.scenarios["sine_sweep_linear"] = _nozzle({"pid": 3.0, "lqi": 0.28, "hysteresis": 0.26})
+    result.scenarios["sine_sweep_strong"] = _nozzle({"pid": 3.3, "lqi": 1.50, "hysteresis": 0.45}, ended=16)
+    result.scenarios["sine_sweep_strong_linear"] = _nozzle({"pid": 3.7, "lqi": 0.25, "hysteresis": 0.50})
+    lines = nozzle_tables(result)
+    assert "| sine_sweep_strong | 3.3000 (16 of 20 ended early) | 1.5000 | 0.4500 | -70.0 % |" in lines
+    assert any("the IAE understates the tracking" in line for line in lines)
+    said = lines[-1]
+    assert "sine_sweep_strong -170.0 (against sine_sweep_strong_linear)" in said
+    assert "helps a joint without hysteresis too; on sine_sweep_strong_linear it adds to the cost" in said

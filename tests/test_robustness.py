@@ -56,6 +56,26 @@ def test_monte_carlo_writes_the_table_from_the_drawn_plants(tmp_path):
     assert text.startswith(f"# Robustness on {NOZZLE}") and "3 plants drawn with relative spread 0.3" in text
 
 
+def test_the_nominal_mean_is_in_the_json_and_a_repeated_row_is_said(tmp_path):
+    """robustness.md's nominal-plant column had no source in robustness.json; and two controllers
+    with the same episode costs (the report's `robust` and `lqi` on the nozzle) stood as two equal
+    rows without a word."""
+    from agents import parse_controller
+    from ssme_envs.evaluation import evaluate
+    from ssme_envs.robustness import write_robustness
+
+    lqi = parse_controller("lqi", NOZZLE)
+    factories = {"zero": parse_controller("zero", NOZZLE), "lqi": lqi, "twin": lqi}
+    drawn = evaluate(NOZZLE, factories, ["step"], 3, options={"plant_spread": 0.3})
+    nominal = evaluate(NOZZLE, factories, ["step"], 3)
+    text = write_robustness(tmp_path, drawn, nominal, 0.3, "the command").read_text()
+    rows = json.loads((tmp_path / "robustness.json").read_text())["scenarios"]["step"]
+    for name in factories:
+        assert rows[name]["nominal_mean"] == nominal["step"][name].cost_mean
+    assert "`twin` gives every episode the cost `lqi` gives it, to the bit" in text
+    assert "`lqi` gives every episode" not in text and "`zero` gives every episode" not in text
+
+
 def test_plant_option_reaches_both_runs_and_uncertainty_draws_from_the_identified_model(tmp_path):
     """``--plant identified --plant-spread uncertainty``: the drawn run is evaluate() with those env
     options, the nominal run evaluate() on the identified plant alone (not the scenario's own)."""

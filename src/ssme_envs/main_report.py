@@ -159,23 +159,49 @@ def nozzle_tables(results: EvaluationResult) -> list[str]:
         "| scenario | pid | lqi | lqi + compensation | change |",
         "|---|---|---|---|---|",
     ]
-    change = {}
+    change, ended = {}, False
     for scenario in results:
-        iae = {c: results[scenario][c].outputs["angle"].iae for c in ("pid", "lqi", "hysteresis")}
-        change[scenario] = 100 * (iae["hysteresis"] / iae["lqi"] - 1)
-        lines.append(
-            f"| {scenario} | {iae['pid']:.4f} | {iae['lqi']:.4f} | {iae['hysteresis']:.4f} | "
-            f"{change[scenario]:+.1f} % |"
+        rows = results[scenario]
+        cells = []
+        for c in ("pid", "lqi", "hysteresis"):
+            m = rows[c]
+            cells.append(f"{m.outputs['angle'].iae:.4f}")
+            if m.terminations:  # its IAE stops at the end: a cost the IAE does not show
+                cells[-1] += f" ({m.terminations} of {m.episodes} ended early)"
+                ended = True
+        change[scenario] = 100 * (
+            rows["hysteresis"].outputs["angle"].iae / rows["lqi"].outputs["angle"].iae - 1
         )
+        lines.append(f"| {scenario} | {' | '.join(cells)} | {change[scenario]:+.1f} % |")
+    if ended:
+        lines += [
+            "",
+            "An episode that leaves the envelope ends there, and its IAE counts only the steps before: "
+            "where episodes ended early, the IAE understates the tracking (the cost tables above charge "
+            "the steps left).",
+        ]
     pairs = [(bw, lin) for bw, lin in LINEAR_TWINS.items() if bw in change and lin in change]
     if pairs:
-        shares = ", ".join(f"{bw} {change[bw] - change[lin]:+.1f}" for bw, lin in pairs)
+        shares = ", ".join(f"{bw} {change[bw] - change[lin]:+.1f} (against {lin})" for bw, lin in pairs)
         lines += [
             "",
             "What the compensation does about hysteresis: its change on the Bouc-Wen joint minus its change "
-            f"on the linear joint (Table 1's linear row) under the same references, in points: {shares}. "
-            "The rest of its gain is torque along the motion that helps either joint.",
+            "on the same joint's linear twin (Table 1's linear row, or the strong joint's own for "
+            f"sine_sweep_strong) under the same references, in points: {shares}.",
         ]
+        helps = [lin for _, lin in pairs if change[lin] < 0]
+        hurts = [lin for _, lin in pairs if change[lin] > 0]
+        if helps:
+            lines[-1] += (
+                f" Its gain on the linear twins ({', '.join(helps)}) is torque along the motion, which "
+                "helps a joint without hysteresis too"
+            )
+            lines[-1] += (
+                f"; on {', '.join(hurts)} it adds to the cost (its feedforward is the inverse of the "
+                "identified Table 1 joint's hysteresis)."
+                if hurts
+                else "."
+            )
     return lines
 
 

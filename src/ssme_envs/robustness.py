@@ -119,13 +119,39 @@ def robustness_markdown(
         for name, note in (notes or {}).items():
             if name in rows:
                 lines.append(f"\n- `{name}`: {note}")
+        for name, twin in same_costs(result, scenario).items():
+            lines.append(
+                f"\n- `{name}` gives every episode the cost `{twin}` gives it, to the bit: the two act "
+                "alike on these plants (a row repeated, not a typo)."
+            )
         lines.append("")
     return lines
 
 
-def robustness_dict(result: EvaluationResult) -> dict[str, dict[str, dict[str, float]]]:
-    """The table as plain dicts, for results.json."""
-    return {s: {c: row._asdict() for c, row in rows.items()} for s, rows in robustness(result).items()}
+def same_costs(result: EvaluationResult, scenario: str) -> dict[str, str]:
+    """``{controller: the first controller before it with the same episode costs, bit for bit}``
+    on one scenario of a Monte-Carlo evaluation."""
+    runs = [(c, episode_costs(run)) for (s, c), run in result.rollouts.items() if s == scenario]
+    twins = {}
+    for i, (name, costs) in enumerate(runs):
+        for earlier, theirs in runs[:i]:
+            if earlier not in twins and np.array_equal(costs, theirs):
+                twins[name] = earlier
+                break
+    return twins
+
+
+def robustness_dict(
+    result: EvaluationResult, nominal: EvaluationResult | None = None
+) -> dict[str, dict[str, dict[str, float]]]:
+    """The table as plain dicts, for robustness.json, with each controller's mean cost on the
+    nominal plant (``nominal_mean``) where ``nominal`` holds the scenario."""
+    table = {s: {c: row._asdict() for c, row in rows.items()} for s, rows in robustness(result).items()}
+    for scenario, rows in table.items():
+        if nominal is not None and scenario in nominal:
+            for name, row in rows.items():
+                row["nominal_mean"] = nominal[scenario][name].cost_mean
+    return table
 
 
 def write_robustness(
@@ -145,7 +171,7 @@ def write_robustness(
         "env": result.env_id,
         "command": command,
         "plant_spread": spread,
-        "scenarios": robustness_dict(result),
+        "scenarios": robustness_dict(result, nominal),
     }
     write_text(out / "robustness.json", json.dumps(data, indent=1) + "\n")
     path = out / "robustness.md"
@@ -162,6 +188,7 @@ __all__ = [
     "robustness",
     "robustness_dict",
     "robustness_markdown",
+    "same_costs",
     "spread_envs",
     "spread_options",
     "summarize",
