@@ -3,6 +3,7 @@ zero action, UNEXPLAINED when there is none, and none for the shipped report pla
 
 import math
 
+import numpy as np
 import pytest
 
 from ssme_envs.evaluation_result import ActuatorMetrics, ControllerMetrics, EvaluationResult, OutputMetrics
@@ -161,3 +162,35 @@ def test_the_nozzle_table_flags_early_ends_and_compares_each_scenario_with_its_o
     said = lines[-1]
     assert "sine_sweep_strong -170.0 (against sine_sweep_strong_linear)" in said
     assert "helps a joint without hysteresis too; on sine_sweep_strong_linear it adds to the cost" in said
+
+
+def test_the_ratio_standard_error_agrees_with_a_paired_bootstrap():
+    """The learned / classical ratio's standard error (ratio estimator, paired episodes) against
+    a bootstrap of the same episodes, resampled in pairs (seeded numpy)."""
+    from types import SimpleNamespace
+
+    from ssme_envs.report_costs import ratio_standard_error
+
+    rng = np.random.default_rng(3)
+    base = rng.gamma(2.0, 1.0, 400)
+    costs = {"a": base * 1.1 + rng.normal(0.0, 0.3, 400), "b": base}
+    result = EvaluationResult(THROTTLE)
+    for name, c in costs.items():  # one step per episode, its reward minus the cost
+        result.rollouts[("s", name)] = SimpleNamespace(rewards=-c[None, :], alive=np.ones((1, 400)))
+    se = ratio_standard_error(result, "s", "a", "b")
+    picks = rng.integers(0, 400, (4000, 400))
+    boot = costs["a"][picks].mean(axis=1) / costs["b"][picks].mean(axis=1)
+    assert se == pytest.approx(boot.std(), rel=0.1)
+    assert ratio_standard_error(result, "s", "a", "missing") is None
+
+
+def test_the_report_gives_each_envs_reward_from_its_docs():
+    from ssme_envs.envs import catalogue
+    from ssme_envs.main_report import reward_lines
+
+    lines = reward_lines(dict.fromkeys(catalogue.ENVS))
+    assert len(lines) == len(catalogue.ENVS)
+    assert all("see the env's docs" not in line for line in lines)
+    assert any(
+        line.startswith("- ssme_envs/NozzleTVC-v0: ``-0.1 e^2 - 0.1 (a_k - a_(k-1))^2``") for line in lines
+    )

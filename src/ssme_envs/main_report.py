@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import inspect
 import re
 from pathlib import Path
 
 from ssme_envs.evaluation import SCENARIOS
 from ssme_envs.evaluation_result import EvaluationResult
 from ssme_envs.outputs import write_text
+from ssme_envs.report_causes import options_text
 from ssme_envs.report_costs import (
     LAUNCHER,
     NOZZLE,
@@ -205,6 +207,21 @@ def nozzle_tables(results: EvaluationResult) -> list[str]:
     return lines
 
 
+def reward_lines(evaluations: dict[str, EvaluationResult]) -> list[str]:
+    """Each evaluated env's reward, as its own docs (the env class's "Rewards" section) give it."""
+    import gymnasium as gym
+    from gymnasium.envs.registration import load_env_creator
+
+    lines = []
+    for env_id in evaluations:
+        entry = gym.spec(env_id).entry_point
+        doc = inspect.getdoc(entry if callable(entry) else load_env_creator(entry)) or ""
+        found = re.search(r"^## [^\n]*Rewards\n(.*?)(?:\n\n|\Z)", doc, re.S | re.M)
+        said = " ".join(found.group(1).split()) if found else "see the env's docs"
+        lines.append(f"- {env_id}: {said}")
+    return lines
+
+
 def write_main_report(
     out: Path,
     evaluations: dict[str, EvaluationResult],
@@ -222,14 +239,20 @@ def write_main_report(
         "# ssme-envs: identification and controller comparison",
         "",
         f"Command: `ssme-envs report --out {shown or out} --episodes {episodes}` ({seconds:.0f} s). "
-        "Every number below comes from a seeded run and is reproduced bit for bit by the same command on a "
-        "machine of the same CPU family (numpy's float32 log1p, sin and cos, which make the envs' sensor "
-        "noise, differ in their last bits between SIMD builds: see the README's vector env section).",
+        "Every number below but that run time comes from a seeded run and is reproduced bit for bit by "
+        "the same command on a machine of the same CPU family (numpy's float32 log1p, sin and cos, which "
+        "make the envs' sensor noise, differ in their last bits between SIMD builds: see the README's "
+        "vector env section).",
         "",
         "## Controllers",
         "",
         f"Each controller is designed on the identified model (`name:truth`: on the truth's linear model) "
-        f"and evaluated on the truth, {episodes} episodes per scenario, the same seeds for every controller.",
+        f"and evaluated on the truth, {episodes} episodes per scenario (episode i seeded with i, "
+        f"i = 0..{episodes - 1}), the same episodes for every controller. An episode's cost is minus its "
+        "return, the sum of the env's rewards (what each scenario sets is listed under \"Every "
+        'scenario" below):',
+        "",
+        *reward_lines(evaluations),
         "",
         *cost_over_zero_tables(evaluations),
         *learned_over_classical_tables(evaluations),
@@ -247,7 +270,8 @@ def write_main_report(
         lines += [f"![{scenarios[0]}]({folder}/{scenarios[0]}.png)", ""]
         for scenario in scenarios:
             costs = ", ".join(f"{c} {m.cost_mean:.3f}" for c, m in results[scenario].items())
-            lines.append(f"- {scenario}: cost {costs}")
+            options = options_text(SCENARIOS[env_id].get(scenario, {})) or "the env's defaults"
+            lines.append(f"- {scenario} ({options}): cost {costs}")
         lines.append("")
     robust = [
         env_id for env_id in ROBUSTNESS_PLAN if (out / robustness_folder(env_id) / "robustness.md").exists()

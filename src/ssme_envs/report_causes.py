@@ -150,12 +150,12 @@ WRITTEN_CAUSES: dict[tuple[str, str, str], Cause] = {
 }
 
 
-def _options_text(options: dict) -> str:
+def options_text(options: dict) -> str:
     """Env options as TOML writes them inline: ``plant = "identified", truth = {backlash = 0.0}``."""
 
     def value(v: object) -> str:
         if isinstance(v, dict):
-            return "{" + _options_text(v) + "}"
+            return "{" + options_text(v) + "}"
         if isinstance(v, bool):
             return str(v).lower()
         return f'"{v}"' if isinstance(v, str) else repr(v)
@@ -183,7 +183,7 @@ def training_cause(results: EvaluationResult, scenario: str, controller: str) ->
     options = config.get("env_options", {})
     if "fault" in options:
         return None
-    trained = _options_text(options) or "the env's defaults"
+    trained = options_text(options) or "the env's defaults"
     said = (
         f"trained without faults (agents/policies/{directory.name}/config.toml: {trained}): it has never "
         f"met a {fault['kind'].replace('_', ' ')}"
@@ -214,6 +214,7 @@ __all__ = [
     "Cause",
     "is_classical",
     "measured_causes",
+    "options_text",
     "training_cause",
     "written_cause",
 ]

@@ -4,6 +4,8 @@ policy against the best classical design."""
 
 from __future__ import annotations
 
+import numpy as np
+
 from ssme_envs.evaluation_result import ControllerMetrics, EvaluationResult
 from ssme_envs.report_causes import (
     LAUNCHER,
@@ -141,6 +143,22 @@ def best_of_each(
     return best
 
 
+def ratio_standard_error(results: EvaluationResult, scenario: str, top: str, bottom: str) -> float | None:
+    """Standard error of the ratio of two controllers' mean episode costs on the same episodes:
+    ``std(a_i - r b_i) / (sqrt(n) mean(b))`` (the ratio estimator's, paired); None without both
+    controllers' per-episode costs (their rollouts)."""
+    from ssme_envs.robustness import episode_costs
+
+    runs = results.rollouts
+    if (scenario, top) not in runs or (scenario, bottom) not in runs:
+        return None
+    a, b = episode_costs(runs[(scenario, top)]), episode_costs(runs[(scenario, bottom)])
+    if len(a) != len(b) or len(a) < 2 or not b.mean() > 0:
+        return None
+    r = a.mean() / b.mean()
+    return float(np.std(a - r * b, ddof=1) / (np.sqrt(len(a)) * b.mean()))
+
+
 def learned_over_classical_tables(
     evaluations: dict[str, EvaluationResult], skip: tuple[str, ...] = ()
 ) -> list[str]:
@@ -154,9 +172,12 @@ def learned_over_classical_tables(
         "`ppo:residual` is PPO trained to add a correction to a classical design's action "
         "(agents/residual.py): it starts from that design, so it shows what learning adds to it "
         "(`ppo:residual_quiet`: trained with the correction's square taken off its reward, so that it "
-        "corrects less); `ppo` learns the whole action.",
+        "corrects less); `ppo` learns the whole action. The standard error is the ratio's over the "
+        "episodes, both run on the same ones (paired); a ratio within two of them of another is not "
+        "told apart from it by these episodes.",
         "",
-        "| env | scenario | best classical | cost | best learned | cost | learned / classical |",
+        "| env | scenario | best classical | cost | best learned | cost | learned / classical "
+        "(+- 2 standard errors) |",
         "|---|---|---|---|---|---|---|",
     ]
     above = []
@@ -166,7 +187,11 @@ def learned_over_classical_tables(
             if lp > LEARNED_GOAL * lc:
                 flag = " (above the bar)"
                 above.append((env_id, scenario))
-            lines.append(f"| {env_id} | {scenario} | {c} | {lc:.3f} | {p} | {lp:.3f} | {lp / lc:.2f}{flag} |")
+            se = ratio_standard_error(results, scenario, p, c)
+            spread = "" if se is None else f" +- {2 * se:.2g}"
+            lines.append(
+                f"| {env_id} | {scenario} | {c} | {lc:.3f} | {p} | {lp:.3f} | {lp / lc:.2f}{spread}{flag} |"
+            )
     if above:
         lines.append("")
         for env_id, scenario in above:
@@ -191,6 +216,7 @@ __all__ = [
     "learned_over_classical_tables",
     "measured_causes",
     "over_zero",
+    "ratio_standard_error",
     "ratio_text",
     "unexplained",
 ]
