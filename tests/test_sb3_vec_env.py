@@ -161,6 +161,27 @@ def test_vec_env_is_wrapped(env_id):
     assert plain.env_is_wrapped(gym.wrappers.vector.RecordEpisodeStatistics) == [False, False]
 
 
+def test_episode_statistics_reach_the_ending_steps_info():
+    """gymnasium's RecordEpisodeStatistics puts an ended episode's statistics at the top of a
+    SAME_STEP info, which the adapter filed with the reset's entries: SB3 (ep_info_buffer) reads
+    ``info["episode"]`` from the ending step's info, where DummyVecEnv with a Monitor puts it."""
+    env_id = "ssme_envs/NozzleTVC-v0"
+    native = gym.make_vec(env_id, num_envs=2, vectorization_mode="vector_entry_point",
+                          autoreset_mode=AutoresetMode.SAME_STEP, max_episode_steps=5)  # fmt: skip
+    adapter = SB3VecEnv(gym.wrappers.vector.RecordEpisodeStatistics(native), seed=0)
+    dummy = DummyVecEnv([lambda: Monitor(gym.make(env_id, max_episode_steps=5)) for _ in range(2)])
+    dummy.seed(0)
+    for vec_env in (adapter, dummy):
+        vec_env.reset()
+        for _ in range(5):
+            _, _, dones, infos = vec_env.step(np.zeros((2, 1), dtype=np.float32))
+        assert dones.all()
+        assert [info["episode"]["l"] for info in infos] == [5, 5]
+        assert all("episode" not in info for info in vec_env.reset_infos)
+    adapter.close()
+    dummy.close()
+
+
 @both
 def test_vec_seeding(kind, env_id):
     """SB3's test_vec_seeding: seed() without a seed still seeds every env differently."""

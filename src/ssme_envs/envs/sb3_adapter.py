@@ -63,6 +63,14 @@ class SB3VecEnv(VecEnv):
                 f"{type(base).__name__} has neither sub_env(i) nor envs: no per-sub-env access for SB3"
             )
         self.venv = vector_env
+        # the info keys under which gymnasium's RecordEpisodeStatistics puts an ended episode's
+        # statistics: at the top of a SAME_STEP info, among the reset's entries, where SB3 wants
+        # them in the ending step's info (as its Monitor puts them)
+        self._episode_keys = tuple(
+            getattr(env, "_stats_key", "episode")
+            for env in _vector_wrappers(vector_env)
+            if isinstance(env, gym.wrappers.vector.RecordEpisodeStatistics)
+        )
         super().__init__(
             vector_env.num_envs, vector_env.single_observation_space, vector_env.single_action_space
         )
@@ -106,6 +114,9 @@ class SB3VecEnv(VecEnv):
             # SAME_STEP: the ending step's info is in final_info, the reset's at the top
             self.reset_infos[i] = infos[i]
             infos[i] = _sub_info(info["final_info"], i)
+            for key in self._episode_keys:
+                if key in self.reset_infos[i]:
+                    infos[i][key] = self.reset_infos[i].pop(key)
             infos[i]["terminal_observation"] = info["final_obs"][i]
             infos[i]["TimeLimit.truncated"] = bool(truncated[i] and not terminated[i])
         return obs, rewards.astype(np.float32), dones, infos
@@ -142,10 +153,7 @@ class SB3VecEnv(VecEnv):
         targets = self._targets(indices)
         if self._sub_envs and isinstance(self._sub_envs[0], gym.Env):
             return [is_wrapped(env, wrapper_class) for env in targets]
-        env, wrapped = self.venv, False
-        while isinstance(env, gym.vector.VectorWrapper):
-            wrapped = wrapped or isinstance(env, wrapper_class)
-            env = env.env
+        wrapped = any(isinstance(env, wrapper_class) for env in _vector_wrappers(self.venv))
         return [wrapped] * len(targets)
 
     def _targets(self, indices: VecEnvIndices) -> list[Any]:
@@ -154,6 +162,15 @@ class SB3VecEnv(VecEnv):
         if indices is None:  # every sub-env: nothing to check
             return list(self._sub_envs)
         return [self._sub_envs[sub_env_index(i, self.num_envs)] for i in self._get_indices(indices)]
+
+
+def _vector_wrappers(env: gym.vector.VectorEnv) -> list[gym.vector.VectorWrapper]:
+    """The gymnasium vector wrappers around a vector env, outermost first."""
+    wrappers = []
+    while isinstance(env, gym.vector.VectorWrapper):
+        wrappers.append(env)
+        env = env.env
+    return wrappers
 
 
 def _sub_info(info: dict[str, Any], i: int) -> dict[str, Any]:
