@@ -208,3 +208,24 @@ def test_huge_finite_actions_are_clipped_without_warnings(env_id, value):
     want = sync.step(action)
     for a, b in zip(got[:4], want[:4], strict=True):
         np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.parametrize("env_id", ["ssme_envs/EngineTracking-v0", "ssme_envs/NozzleTVC-v0"])
+def test_max_episode_steps_minus_one_is_no_limit_as_gymnasium_reads_it(env_id):
+    """``gymnasium.make`` reads max_episode_steps=-1 as no TimeLimit (the env's own end); the
+    native vector env refused it as not a positive integer."""
+    options = {**ENVS[env_id], "episode_seconds": 2 * ENVS[env_id]["episode_seconds"]}
+    sync = gym.make_vec(env_id, num_envs=2, vectorization_mode="sync", max_episode_steps=-1, **options)
+    native = gym.make_vec(env_id, num_envs=2, vectorization_mode="vector_entry_point", max_episode_steps=-1,
+                          **options)  # fmt: skip
+    ends = []
+    for env in (sync, native):
+        env.reset(seed=0)
+        steps, truncated = 0, np.zeros(2, bool)
+        while not truncated.any():
+            _, _, _, truncated, _ = env.step(np.zeros(env.action_space.shape, np.float32))
+            steps += 1
+        ends.append(steps)
+        env.close()
+    horizon = round(options["episode_seconds"] / gym.make(env_id, **options).unwrapped.task.dt)
+    assert ends == [horizon, horizon]  # the env's own end, twice the short episodes

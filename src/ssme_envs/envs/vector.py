@@ -43,7 +43,7 @@ class TrackingVectorEnv(VectorEnv):
     """``num_envs`` copies of a tracking env as one batch (subclasses name the task).
 
     Options are those of the scalar env; ``max_episode_steps`` truncates episodes like the
-    TimeLimit wrapper of the scalar env. ``autoreset_mode``, as gymnasium's ``SyncVectorEnv``:
+    TimeLimit wrapper of the scalar env (-1: none, as ``gymnasium.make`` reads it). ``autoreset_mode``, as gymnasium's ``SyncVectorEnv``:
 
     - NEXT_STEP (default): the step after an episode's end resets that sub-env (reward 0, not
       terminated or truncated).
@@ -83,6 +83,8 @@ class TrackingVectorEnv(VectorEnv):
         **options: Any,
     ) -> None:
         num_envs = positive_int("num_envs", num_envs)
+        if isinstance(max_episode_steps, (int, np.integer)) and max_episode_steps == -1:
+            max_episode_steps = None  # gymnasium.make's "no TimeLimit": the task's own horizon
         if max_episode_steps is not None:
             max_episode_steps = positive_int("max_episode_steps", max_episode_steps)
         if render_mode is not None:
