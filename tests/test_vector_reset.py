@@ -229,3 +229,24 @@ def test_max_episode_steps_minus_one_is_no_limit_as_gymnasium_reads_it(env_id):
         env.close()
     horizon = round(options["episode_seconds"] / gym.make(env_id, **options).unwrapped.task.dt)
     assert ends == [horizon, horizon]  # the env's own end, twice the short episodes
+
+
+@pytest.mark.parametrize(
+    ("env_id", "option", "value"),
+    [
+        ("ssme_envs/EngineTracking-v0", "reference", np.array(["step", "zero"])),
+        ("ssme_envs/EngineTracking-v0", "reference", np.array("step")),
+        ("ssme_envs/NozzleTVC-v0", "reference", np.array(["step"])),
+        ("ssme_envs/EngineTracking-v0", "plant", np.array(["truth", "identified"])),
+        ("ssme_envs/EngineTracking-v0", "plant", 3),
+    ],
+)
+def test_a_name_option_given_as_an_array_is_refused_naming_the_option(env_id, option, value):
+    """reference and plant were compared with their names as they came: a numpy array raised
+    numpy's "truth value of an array is ambiguous", or passed as its one element."""
+    for make in (
+        gym.make,
+        lambda i, **o: gym.make_vec(i, num_envs=2, vectorization_mode="vector_entry_point", **o),
+    ):
+        with pytest.raises(TypeError, match=rf"^{option} must be .*got (ndarray|int)\b"):
+            make(env_id, **{option: value})

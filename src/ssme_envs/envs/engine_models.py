@@ -6,6 +6,7 @@ is built, kept apart from the task that steps the chosen plant every sample."""
 
 from __future__ import annotations
 
+import os
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -66,6 +67,11 @@ def resolve_plant(plant: str | Path | AlphaCanonicalModel, power: float) -> Alph
     """
     if isinstance(plant, AlphaCanonicalModel):
         return plant
+    if not isinstance(plant, (str, os.PathLike)):  # an array compared with the names is ambiguous
+        raise TypeError(
+            "plant must be 'truth', 'identified', 'nonlinear', a model.json path or a model, got "
+            f"{type(plant).__name__}"
+        )
     if plant == "truth":
         # at a Table I level, Table I's model is the linked model's local model there, to the
         # bit, without building its interpolators (scipy.interpolate: a quarter of a second on

@@ -29,7 +29,11 @@ _BLOCK_NUMBERS = 1 << 16  # numbers per row block of normal_pairs: 256 KiB array
 
 
 def check_reference(kind: str) -> str:
-    """The reference kind, or ValueError listing the valid ones."""
+    """The reference kind, or ValueError listing the valid ones (TypeError for other than a str:
+    a numpy array compared with the kinds would be ambiguous, or pass as its one element)."""
+    if not isinstance(kind, str):
+        kinds = ", ".join(REFERENCE_KINDS)
+        raise TypeError(f"reference must be a str, one of {kinds}; got {type(kind).__name__}")
     if kind not in REFERENCE_KINDS:
         raise ValueError(f"unknown reference {kind!r}; choose one of {', '.join(REFERENCE_KINDS)}")
     return kind

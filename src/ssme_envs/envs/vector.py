@@ -43,7 +43,8 @@ class TrackingVectorEnv(VectorEnv):
     """``num_envs`` copies of a tracking env as one batch (subclasses name the task).
 
     Options are those of the scalar env; ``max_episode_steps`` truncates episodes like the
-    TimeLimit wrapper of the scalar env (-1: none, as ``gymnasium.make`` reads it). ``autoreset_mode``, as gymnasium's ``SyncVectorEnv``:
+    TimeLimit wrapper of the scalar env (-1: none, as ``gymnasium.make`` reads it).
+    ``autoreset_mode``, as gymnasium's ``SyncVectorEnv``:
 
     - NEXT_STEP (default): the step after an episode's end resets that sub-env (reward 0, not
       terminated or truncated).
