@@ -237,6 +237,21 @@ def test_render_rgb_array():
     env.close()
 
 
+@pytest.mark.parametrize(
+    "env_id", ["ssme_envs/EngineTracking-v0", "ssme_envs/NozzleTVC-v0", "ssme_envs/LauncherPitch-v0"]
+)
+def test_render_before_the_first_reset_says_so(env_id):
+    """The env class itself (no OrderEnforcing) failed inside the renderer with an IndexError."""
+    from ssme_envs.envs.tracking_env import EpisodeOverError
+
+    env = gym.make(env_id, render_mode="rgb_array").unwrapped
+    with pytest.raises(EpisodeOverError, match=r"render\(\) before the first reset"):
+        env.render()
+    env.reset(seed=0)
+    assert env.render().dtype == np.uint8
+    env.close()
+
+
 def test_render_human_draws_each_step():
     import matplotlib
 

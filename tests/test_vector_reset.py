@@ -250,3 +250,21 @@ def test_a_name_option_given_as_an_array_is_refused_naming_the_option(env_id, op
     ):
         with pytest.raises(TypeError, match=rf"^{option} must be .*got (ndarray|int)\b"):
             make(env_id, **{option: value})
+
+
+@pytest.mark.parametrize(("env_id", "time", "accepted"), [
+    ("ssme_envs/EngineTracking-v0", 9.97, True), ("ssme_envs/EngineTracking-v0", 9.98, False),
+    ("ssme_envs/NozzleTVC-v0", 3.99, True), ("ssme_envs/NozzleTVC-v0", 3.996, False),
+])  # fmt: skip
+def test_a_fault_time_inside_the_episode_that_rounds_to_its_last_step_is_told_so(env_id, time, accepted):
+    """9.98 s on a 10 s episode rounds to its last step (250 of 0.04 s); the message said it was
+    beyond the episode."""
+    fault = {"kind": "sensor_bias", "time": time}
+    if accepted:
+        gym.make(env_id, fault=fault).close()
+        return
+    with pytest.raises(
+        ValueError,
+        match=rf"fault time {time:g} s is beyond the episode .* or at its last step \(it rounds to step",
+    ):
+        gym.make(env_id, fault=fault)

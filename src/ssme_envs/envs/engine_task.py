@@ -177,13 +177,8 @@ class EngineTask:
         object.__setattr__(self, "noise_scale_arrays", tuple(np.full(1, s) for s in self.noise_scale))
         offsets = None if self.offset_table is None else Schedule.of(self.offset_table)
         object.__setattr__(self, "offsets", offsets)
-        object.__setattr__(
-            self, "fault_step", round(self.fault.time / self.dt) if self.fault is not None else -1
-        )
-        if self.fault is not None and self.fault_step >= self.horizon:
-            raise ValueError(
-                f"fault time {self.fault.time:g} s is beyond the episode ({self.horizon * self.dt:g} s)"
-            )
+        fault_step = -1 if self.fault is None else self.fault.step(self.dt, self.horizon)
+        object.__setattr__(self, "fault_step", fault_step)
         bias = (
             abs(self.fault.magnitude) if self.fault is not None and self.fault.kind == "sensor_bias" else 0.0
         )

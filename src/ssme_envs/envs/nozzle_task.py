@@ -186,13 +186,8 @@ class NozzleTask:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "rk4_params", rk4_parameters(self.plant.normalized()))
-        object.__setattr__(
-            self, "fault_step", round(self.fault.time / self.dt) if self.fault is not None else -1
-        )
-        if self.fault is not None and self.fault_step >= self.horizon:
-            raise ValueError(
-                f"fault time {self.fault.time:g} s is beyond the episode ({self.horizon * self.dt:g} s)"
-            )
+        fault_step = -1 if self.fault is None else self.fault.step(self.dt, self.horizon)
+        object.__setattr__(self, "fault_step", fault_step)
         bias = abs(self.fault.magnitude) if self.fault is not None and self.fault.kind == "sensor_bias" else 0
         error = DEG * (self.envelope + float(self.amplitude[0]) + bias) + 1.0
         object.__setattr__(self, "step_cost_bound", self.error_weight * error**2 + self.rate_weight * 2.0**2)

@@ -259,6 +259,19 @@ class Fault:
     index: int = 0
     magnitude: float = 0.0
 
+    def step(self, dt: float, horizon: int) -> int:
+        """The step the fault's time rounds to (``round(time / dt)``), checked to lie before the last
+        of a ``horizon``-step episode's steps (a fault acts from the step after it, a sensor bias
+        from that step on); ValueError naming the time and the times that do."""
+        step = round(self.time / dt)
+        if step >= horizon:
+            raise ValueError(
+                f"fault time {self.time:g} s is beyond the episode ({horizon * dt:g} s) or at its last "
+                f"step (it rounds to step {step} of {dt:g} s, and the episode has {horizon}): give a time "
+                f"below {(horizon - 0.5) * dt:g} s"
+            )
+        return step
+
     @classmethod
     def parse(
         cls,

@@ -193,6 +193,8 @@ class TrackingEnv(gym.Env):
         if self.render_mode is None:
             gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array' or 'human'")
             return None
+        if not self._history:  # nothing to draw (gymnasium's OrderEnforcing says so through make)
+            raise EpisodeOverError("render() before the first reset(): call reset()")
         image, self._figure = render_history(
             np.array(self._history),
             self.task.dt,
