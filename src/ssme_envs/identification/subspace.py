@@ -45,6 +45,7 @@ Kalman filter", Modeling, Identification and Control 30(2), 2009.
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -58,7 +59,7 @@ from ssme_envs.identification.innovations_model import (
     second_order_parameters,
     to_continuous,
 )
-from ssme_envs.identification.subspace_bic import bic_order, realize
+from ssme_envs.identification.subspace_bic import bic_order, realize, record_bic
 from ssme_envs.identification.subspace_checks import (
     arx_innovations,
     check_input_directions,
@@ -158,6 +159,10 @@ def _largest_drop(singular_values: np.ndarray, candidates: list[int]) -> int:
     """The candidate order at the largest drop in log10 of the normalized singular values."""
     logs = np.log10(np.maximum(singular_values / singular_values[0], np.finfo(float).tiny))
     return candidates[int(np.argmax([logs[n - 1] - logs[n] for n in candidates]))]
+
+
+def _record_score(u: np.ndarray, y: np.ndarray, model: InnovationsModel, first: int) -> float | None:
+    return record_bic(model, u, y, first)
 
 
 def _identify_once(
@@ -336,7 +341,9 @@ def dsr_e(
 
     try:  # an unstable trial's unit responses overflow: its ValueError says so, not a RuntimeWarning
         with np.errstate(over="ignore", invalid="ignore"):
-            fit, error = refined_fit(one_pass, n_samples, m, p, past, future, past_horizon is None), None
+            score = None if order is not None else functools.partial(_record_score, u, y)
+            fit = refined_fit(one_pass, n_samples, m, p, past, future, past_horizon is None, score)
+            error = None
     except ValueError as exc:
         fit, error = None, exc
     automatic = past_horizon is None or future_horizon is None

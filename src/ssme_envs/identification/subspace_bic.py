@@ -68,6 +68,12 @@ def _exact_bic(model: InnovationsModel, u: np.ndarray, y: np.ndarray, past: int)
     return _bic(y.shape[0] - past, criterion, model.n_states, u.shape[1], y.shape[1])
 
 
+def record_bic(model: InnovationsModel, u: np.ndarray, y: np.ndarray, first: int) -> float | None:
+    """The BIC of ``model``'s one-step prediction errors on the record from sample ``first`` on,
+    as the order rule scores a candidate; None where its predictor is unstable."""
+    return _exact_bic(model, u, y, first)
+
+
 def _exact_scan(
     left: np.ndarray, singular_values: np.ndarray, candidates: list[int], u: np.ndarray, y: np.ndarray,
     e: np.ndarray, past: int, dt: float,
@@ -156,4 +162,10 @@ def bic_order(
     return best, models[best]
 
 
-__all__ = ["TIE_MARGIN", "bic_order", "observability_pair", "realize"]
+__all__ = [
+    "TIE_MARGIN",
+    "bic_order",
+    "observability_pair",
+    "realize",
+    "record_bic",
+]

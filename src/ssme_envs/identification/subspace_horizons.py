@@ -34,6 +34,8 @@ RETRY_PASTS = 3
 RETRY_FUTURE_FACTOR = 2
 
 Pass = Callable[[int, int], tuple[InnovationsModel, np.ndarray, int, bool]]
+# a model's BIC on the record from a sample on; None where its predictor is unstable
+Score = Callable[[InnovationsModel, int], float | None]
 
 
 class HorizonFit(NamedTuple):
@@ -93,11 +95,16 @@ def default_past(n_samples: int, m: int, p: int, future: int) -> int:
 
 
 def refined_fit(
-    one_pass: Pass, n_samples: int, m: int, p: int, past: int, future: int, refine: bool
-) -> HorizonFit:
+    one_pass: Pass, n_samples: int, m: int, p: int, past: int, future: int, refine: bool,
+    score: Score | None = None,
+) -> HorizonFit:  # fmt: skip
     """A first pass at ``past``, then (``refine``: the past horizon is automatic) up to
     ``HORIZON_REFINEMENTS`` longer past horizons, each until ``rho(A - K C)^J`` reaches
-    ``PREDICTOR_DECAY``; a refined pass that fails or turns a stable ``A`` unstable is not kept."""
+    ``PREDICTOR_DECAY``; a refined pass that fails or turns a stable ``A`` unstable is not kept,
+    nor one of another order that ``score`` (a model's BIC on the record from a sample on, None:
+    its predictor is unstable) puts above the pass it would replace, both scored from its horizon
+    on: a longer horizon's innovations estimate on a short record can leave every larger order an
+    unstable predictor, and its order scan then drops states the record shows."""
     model, singular_values, found, noise_free = one_pass(past, future)
     if refine and not noise_free:
         cap = past_horizon_cap(n_samples, m, p, future)
@@ -115,9 +122,18 @@ def refined_fit(
                 break
             if spectral_radius(refined[0].A) >= 1.0 > spectral_radius(model.A):  # nor stable for unstable
                 break
+            if score is not None and refined[2] != found and _scored_worse(score, refined[0], model, wanted):
+                break
             past = wanted
             model, singular_values, found, noise_free = refined
     return HorizonFit(model, singular_values, found, past, future)
+
+
+def _scored_worse(score: Score, new: InnovationsModel, old: InnovationsModel, first: int) -> bool:
+    """Whether ``new`` scores worse than ``old`` on the record from sample ``first`` on (an
+    unstable predictor scores worst)."""
+    new_score, old_score = score(new, first), score(old, first)
+    return new_score is None or (old_score is not None and new_score > old_score)
 
 
 def retry_horizons(
