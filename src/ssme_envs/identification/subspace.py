@@ -73,6 +73,7 @@ from ssme_envs.identification.subspace_horizons import (
     refined_fit,
     retry_horizons,
     samples_needed,
+    uncapped_alternative,
 )
 from ssme_envs.models.linear import check_dt
 
@@ -341,8 +342,10 @@ def dsr_e(
 
     try:  # an unstable trial's unit responses overflow: its ValueError says so, not a RuntimeWarning
         with np.errstate(over="ignore", invalid="ignore"):
-            score = None if order is not None else functools.partial(_record_score, u, y)
+            score = functools.partial(_record_score, u, y)
             fit = refined_fit(one_pass, n_samples, m, p, past, future, past_horizon is None, score)
+            if past_horizon is None:
+                fit = uncapped_alternative(one_pass, fit, n_samples, m, p, score)
             error = None
     except ValueError as exc:
         fit, error = None, exc
