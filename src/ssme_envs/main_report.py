@@ -277,15 +277,21 @@ def write_main_report(
         env_id for env_id in ROBUSTNESS_PLAN if (out / robustness_folder(env_id) / "robustness.md").exists()
     ]
     if robust:
+        from agents.robust import DESIGN_PLANTS, PROCESS_RATIOS, RATE_FACTORS
+
+        rates = ", ".join(f"{f:g}" for f in RATE_FACTORS)
+        ratios = " or ".join(f"{r:g} %" for r in PROCESS_RATIOS)
         lines += [
             "## Robustness: plants drawn per episode",
             "",
             "Each controller over the same plants, drawn per episode with the nozzle joint's parameters "
             "spread (log-normal, relative 0.2, +-3 sigma; J, b, k_el, k_hys, beta_n, gamma_n), designed on "
-            "the nominal identified model. `robust` is the LQ servo with its weights chosen for the "
-            "smallest CVaR over 64 plants drawn around the *design* model (agents/robust.py); "
-            "`ppo:spread` the PPO policy trained with the plant drawn per episode, `ppo` the one trained "
-            "on the nominal plant.",
+            "the nominal identified model. `robust` is the LQ servo with its weights chosen for each "
+            f"scenario, on its own references and noise, for the smallest CVaR over {DESIGN_PLANTS} plants "
+            f"drawn around the *design* model (agents/robust.py): its action-change weight R times one of "
+            f"{rates} and its Kalman filter's process-noise ratio {ratios}; where the nominal weights win, "
+            "its rows are the nominal servo's (`lqi`). `ppo:spread` is the PPO policy trained with the "
+            "plant drawn per episode, `ppo` the one trained on the nominal plant.",
             "",
         ]
         for env_id in robust:
