@@ -80,6 +80,7 @@ CASES: dict[str, list[tuple[tuple[str, ...], str]]] = {
     ],
     "robustness_study": [(("--plants", "0"), "--plants")],
     "short_record_structure": [(("--seeds", "0"), "--seeds"), (("--methods", "mle"), "--methods")],
+    "short_record_subspace": [(("--seeds", "0"), "--seeds")],
     "slow_mode_coverage": [
         (("--seeds", "0"), "--seeds"),
         (("--noise", "0"), "--noise"),
