@@ -224,7 +224,7 @@ def test_a_design_a_later_scenario_rules_out_fails_before_any_rollout():
 
     said: list[str] = []
     factories = {"zero": parse_controller("zero", TRACKING), "picky": picky}
-    with pytest.raises(ValueError, match="cannot follow a ramp"):
+    with pytest.raises(ValueError, match=r"cannot follow a ramp \(designing picky on scenario 'ramp'\)$"):
         evaluate(TRACKING, factories, ["pc_step", "ramp"], 1, progress=said.append)
     assert said == []
 

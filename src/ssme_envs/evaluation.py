@@ -354,8 +354,11 @@ def evaluate(
         except ValueError as exc:
             raise ValueError(f"scenario {scenario!r}: {exc}") from None
         try:
-            for factory in controllers.values():
-                factory(env)
+            for name, factory in controllers.items():
+                try:
+                    factory(env)
+                except ValueError as exc:
+                    raise ValueError(f"{exc} (designing {name} on scenario {scenario!r})") from None
         finally:
             env.close()
     say = progress or (lambda _: None)

@@ -196,13 +196,12 @@ def nozzle_tables(results: EvaluationResult) -> list[str]:
         if helps:
             lines[-1] += (
                 f" Its gain on the linear twins ({', '.join(helps)}) is torque along the motion, which "
-                "helps a joint without hysteresis too"
+                "helps a joint without hysteresis too."
             )
+        if hurts:
             lines[-1] += (
-                f"; on {', '.join(hurts)} it adds to the cost (its feedforward is the inverse of the "
+                f" On {', '.join(hurts)} it adds to the cost (its feedforward is the inverse of the "
                 "identified Table 1 joint's hysteresis)."
-                if hurts
-                else "."
             )
     return lines
 

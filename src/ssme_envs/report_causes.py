@@ -51,14 +51,15 @@ def measured_causes(metrics: ControllerMetrics, unit: str) -> list[str]:
 
 
 def _growth(results: EvaluationResult, scenario: str, controller: str) -> str:
-    """How the unstable loop's oscillation ends, from the time FPOV spends at its limit."""
-    at_limit = results[scenario][controller].actuators["FPOV"].time_at_limit
+    """How the unstable loop's oscillation ends, from the time FPOV spends at its limit and the
+    limit cycles measured."""
+    metrics = results[scenario][controller]
+    at_limit = metrics.actuators["FPOV"].time_at_limit
     if at_limit >= SATURATED:
         return "the oscillation grows until FPOV hits its limit"
-    return (
-        "the oscillation grows into the limit cycle above (FPOV at its limit "
-        f"{100 * at_limit:.0f} % of the time)"
-    )
+    cycles = any(out.limit_cycle_fraction > 0 for out in metrics.outputs.values())  # NaN: untested
+    where = "into the limit cycle above" if cycles else "(no limit cycle measured)"
+    return f"the oscillation grows {where}, FPOV at its limit {100 * at_limit:.0f} % of the time"
 
 
 def _coupled_radii(env_id: str, scenario: str, gains_from: str, powers: list[float | None]) -> list[float]:
@@ -84,8 +85,8 @@ def _pi_coupling(results: EvaluationResult, scenario: str, controller: str) -> s
     radii = _coupled_radii(results.env_id, scenario, "identified", levels)
     unstable = [level for level, r in zip(levels, radii, strict=True) if r > 1.0]
     where = (
-        f"above 1 on the linked truth at {unstable[0]:g}-{unstable[-1]:g} % (its levels every "
-        f"{levels[1] - levels[0]:g} %; largest {max(radii):.3f})"
+        f"above 1 on the linked truth at {', '.join(f'{v:g}' for v in unstable)} % of its levels "
+        f"{', '.join(f'{v:g}' for v in levels)} % (largest {max(radii):.3f})"
         if unstable
         else f"below 1 at every level of the linked truth (largest {max(radii):.3f})"
     )
@@ -101,28 +102,36 @@ def _pi_bucket(results: EvaluationResult, scenario: str, controller: str) -> str
     identified, truth = (
         _coupled_radii(results.env_id, scenario, gains, [None])[0] for gains in ("identified", "truth")
     )
+    cure = (
+        "tuning at the operating point does not make it stable, detuning does (EngineThrottle's "
+        "`pi_scheduled`)"
+        if truth >= 1.0
+        else "tuned on the truth here the loop is stable"
+    )
     return (
         "the SIMC gains, tuned loop by loop with the cross-coupling ignored, close a coupled loop on "
         f"the truth's linear model here of spectral radius {identified:.3f} (gains tuned on the "
         f"identified model) and {truth:.3f} (tuned on the truth here): "
-        f"{_growth(results, scenario, controller)}; tuning at the operating point does not make it "
-        "stable, detuning does (EngineThrottle's `pi_scheduled`)"
+        f"{_growth(results, scenario, controller)}; {cure}"
     )
 
 
 def _stuck_coupled(results: EvaluationResult, scenario: str, controller: str) -> str:
+    from ssme_envs.evaluation import SCENARIOS
+
     rows = results[scenario]
     zero = rows["zero"].cost_mean
+    when = SCENARIOS[results.env_id][scenario]["fault"]["time"]
     said = (
-        "once OPOV sticks (at 4 s) its coupled gain still sets FPOV as if OPOV answered, so FPOV "
-        "chases the Pc error along its own direction and drives MR away"
+        f"once OPOV sticks (at {when:g} s) its coupled gain still sets FPOV as if OPOV answered, so "
+        "FPOV chases the Pc error along its own direction and drives MR away"
     )
-    if controller != "lq:truth" and "lq:truth" in rows:
+    if controller != "lq:truth" and "lq:truth" in rows and rows["lq:truth"].cost_mean > zero:
         lq = rows["lq:truth"]
         said += (
-            f". Integral windup is not the cause: `lq:truth`, with negligible integral action and "
-            f"OPOV at its limit {100 * lq.actuators['OPOV'].time_at_limit:.0f} % of the time, costs "
-            f"{lq.cost_mean / zero:.2f}x the zero action"
+            f". Integral windup is not the cause: `lq:truth`, with negligible integral action and OPOV "
+            f"at its limit {100 * lq.actuators['OPOV'].time_at_limit:.0f} % of the time, costs "
+            f"{lq.cost_mean / zero:.2f}x the zero action too"
         )
     if "pi" in rows:
         said += f". The decoupled PI (FPOV on MR alone) costs {rows['pi'].cost_mean / zero:.2f}x"
