@@ -15,8 +15,8 @@ from hypothesis import strategies as st
 
 import ssme_envs.models
 from ssme_envs.envs.engine_throttle import power_profile
+from ssme_envs.envs.faults import FAULT_KINDS, Fault
 from ssme_envs.envs.inputs import batch_actions
-from ssme_envs.envs.references import FAULT_KINDS, Fault
 from ssme_envs.models.engine import ENGINE_DT, TruthConfig
 from ssme_envs.models.nozzle import NOZZLE_DT
 

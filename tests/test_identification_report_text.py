@@ -14,7 +14,7 @@ from conftest import dlsim, random_system
 from ssme_envs.cli import main
 from ssme_envs.identification import identify
 from ssme_envs.identification.covariance import LEAST_SQUARES_KEPT, least_squares_kept
-from ssme_envs.identification.report import covariance_lines, gain_bias_lines
+from ssme_envs.identification.report_uncertainty import covariance_lines, gain_bias_lines
 from ssme_envs.models import identified_model, published_model
 
 DT = 0.1

@@ -14,8 +14,8 @@ import numpy as np
 from ssme_envs.envs import engine_compiled
 from ssme_envs.envs.engine_models import design_model, env_plant, episode_steps, resolve_plant, resolve_truth
 from ssme_envs.envs.engine_nonlinear_plant import NonlinearPlantCore, nonlinear_engine_of, nonlinear_task
+from ssme_envs.envs.faults import Fault
 from ssme_envs.envs.references import (
-    Fault,
     check_reference,
     normal_pairs,
     reference_signals,

@@ -14,7 +14,7 @@ from ssme_envs.envs import engine_compiled
 from ssme_envs.envs.engine_nonlinear_plant import nonlinear_engine_of, nonlinear_task
 from ssme_envs.envs.engine_task import EnginePlant, EngineTask, resolve_truth
 from ssme_envs.envs.engine_tracking import EngineTrackingEnv
-from ssme_envs.envs.references import Fault
+from ssme_envs.envs.faults import Fault
 from ssme_envs.envs.task import MAX_EPISODE_SECONDS, Carrier, Schedule, Value, real_number, shown
 from ssme_envs.models import engine_step
 from ssme_envs.models.engine import ENGINE_DT, TruthConfig
@@ -255,10 +255,14 @@ class EngineThrottleEnv(EngineTrackingEnv):
     ``u_eq`` is the schedule consistent with the point models' DC gains: zero action flies the
     profile open loop. Out-of-range actions are clipped; NaN or inf raises ValueError.
 
-    ## Observation Space, Rewards
+    ## Observation Space
     As in ``EngineTracking-v0`` (10 values: measured Pc and MR, references, errors, error
-    integrals, previous action; errors in % of the 100 % values). An episode terminates when a
-    tracking error exceeds 10 %, with a penalty larger than the cost of all remaining steps.
+    integrals, previous action; errors in % of the 100 % values).
+
+    ## Rewards
+    As in ``EngineTracking-v0``: ``-0.1 (e_pc^2 + e_mr^2) - 0.1 |a_k - a_(k-1)|^2`` with errors in
+    % of the 100 % values. An episode terminates when a tracking error exceeds 10 %, with a
+    penalty larger than the cost of all remaining steps.
 
     ## Episode End
     Truncation at the end of the profile (default: the time-compressed mission, 60 s, 1500 steps).

@@ -12,6 +12,7 @@ import gymnasium as gym
 import numpy as np
 
 from ssme_envs.envs import nozzle_task
+from ssme_envs.envs.faults import Fault
 from ssme_envs.envs.launcher_servo import (
     body_transition,
     compiled_servo,
@@ -23,7 +24,6 @@ from ssme_envs.envs.nozzle_compiled import score_config, score_kernel, score_obs
 from ssme_envs.envs.nozzle_plants import ENV_STEP_RATE, resolve_nozzle
 from ssme_envs.envs.nozzle_task import DEG, NozzleTask, episode_options, integrate
 from ssme_envs.envs.plant_spread import covered_joints, resolve_spread
-from ssme_envs.envs.references import Fault
 from ssme_envs.envs.task import SYNCED, Blocks, Carrier, Observation, Uniforms, Value, check_number
 from ssme_envs.envs.tracking_env import TrackingEnv
 from ssme_envs.models.nozzle import (

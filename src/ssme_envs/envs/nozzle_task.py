@@ -12,11 +12,11 @@ from typing import Any, ClassVar, NamedTuple
 import gymnasium as gym
 import numpy as np
 
+from ssme_envs.envs.faults import Fault
 from ssme_envs.envs.nozzle_compiled import score_config, score_kernel, score_observe
 from ssme_envs.envs.nozzle_plants import resolve_nozzle, rule_substeps
 from ssme_envs.envs.plant_spread import PlantSpread, covered_joints, resolve_spread
 from ssme_envs.envs.references import (
-    Fault,
     StreamLayout,
     check_reference,
     normal_rows,
