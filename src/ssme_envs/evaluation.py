@@ -345,9 +345,8 @@ def evaluate(
     episodes = positive_int("episodes", episodes)
     check_factories(controllers)
     names = scenario_names(env_id) if scenarios is None else check_scenarios(env_id, scenarios)
-    # Before any rollout, every scenario takes the options and every controller is designed on
-    # each scenario's env (a few ms each; designs are cached): a scenario or a design the options
-    # rule out fails first, not midway through the run.
+    # every scenario's env made and every controller designed on it (a few ms each, designs are
+    # cached) before any rollout: what the options rule out fails first, not midway through
     for scenario in names:
         try:
             env = make_env(env_id, scenario, 1, options)
