@@ -74,6 +74,7 @@ CASES: dict[str, list[tuple[tuple[str, ...], str]]] = {
         (("--out", "{dir}"), "--out"),
         (("--out", "{fifo}"), "--out"),
     ],
+    "nozzle_coloured_noise": [(("--seeds", "1"), "--seeds")],
     "readme_figures": [
         (("--episodes", "0"), "--episodes"),
         (("--episodes", "1000000000000000"), "--episodes"),
