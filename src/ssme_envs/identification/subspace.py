@@ -226,7 +226,8 @@ def dsr_e(
     u : array, shape (T, m) or (T,)
         Inputs (deviations from the operating point), one row per sample.
     y : array, shape (T, p) or (T,)
-        Outputs (deviations), same length.
+        Outputs (deviations), same length. An offset reads as a mode at 1, which the automatic
+        order adds to the states: subtract the operating point.
     dt : float
         Sample time, s.
     order : int, optional
