@@ -97,6 +97,23 @@ def test_an_output_offset_that_drives_lambda_out_of_range_is_refused_by_name():
         identify(u, y + 0.05, 0.04)
 
 
+def test_a_lambda_out_of_range_on_an_unstable_plants_record_is_not_blamed_on_an_offset():
+    """An open-loop record of an unstable plant (pole 1.05, a PRBS on both inputs, 1 % noise):
+    lambda came out -2.9, and the refusal named an output offset as the likely cause; the
+    outputs' means drift with the unstable mode, and the message now says that."""
+    rng = np.random.default_rng(14)
+    pole = rng.uniform(1.005, 1.06)
+    u = prbs(500, amplitude=0.01)
+    a, b = np.diag([pole, rng.uniform(0.3, 0.9)]), rng.normal(size=(2, 2))
+    y = dlsim(a, b, np.eye(2), u)
+    y = y + 0.01 * y.std(axis=0) * rng.standard_normal(y.shape)
+    with pytest.raises(
+        ValueError, match=r"lambda is .*, outside \(0, 2\).*the identified model is unstable"
+    ) as info:
+        identify(u, y, 0.04)
+    assert "offset" not in str(info.value)
+
+
 @settings(max_examples=10, deadline=None)
 @given(offset=hnp.arrays(np.float64, 2, elements=st.floats(-0.002, 0.002)))
 def test_an_output_offset_moves_lambda_as_the_steady_state_gain_says(offset):

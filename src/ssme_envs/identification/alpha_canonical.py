@@ -167,13 +167,21 @@ def check_gains(model: AlphaCanonicalModel, binary: np.ndarray, input_names: Seq
     if not outside.size:
         return
     j = int(outside[0])
-    why = (
-        "a two-level input's lambda is read from the outputs' means (eq 42), so outputs measured "
-        "with an offset from the operating point move it: subtract each output's operating-point "
-        "value, or identify without the asymmetric gains (--symmetric)"
-        if binary[j]
-        else "identify without the asymmetric gains (--symmetric), or check the input's operating point"
-    )
+    radius = model.spectral_radius()
+    if radius >= 1.0:  # the outputs' means drift with the unstable mode: not an offset's doing
+        why = (
+            f"the identified model is unstable (spectral radius {radius:.4g}): on an open-loop record "
+            "of an unstable plant the outputs drift, and lambda with them; identify without the "
+            "asymmetric gains (--symmetric), or from a record taken in closed loop"
+        )
+    elif binary[j]:
+        why = (
+            "a two-level input's lambda is read from the outputs' means (eq 42), so outputs measured "
+            "with an offset from the operating point move it: subtract each output's operating-point "
+            "value, or identify without the asymmetric gains (--symmetric)"
+        )
+    else:
+        why = "identify without the asymmetric gains (--symmetric), or check the input's operating point"
     raise ValueError(
         f"input '{input_names[j]}': the identified lambda is {model.lam[j]:.4g}, outside (0, 2), where "
         f"the valve gain on one side of the operating point changes sign: {why}"
