@@ -163,17 +163,15 @@ def nozzle_tables(results: EvaluationResult) -> list[str]:
     ]
     change, ended = {}, False
     for scenario in results:
-        rows = results[scenario]
-        cells = []
-        for c in ("pid", "lqi", "hysteresis"):
-            m = rows[c]
-            cells.append(f"{m.outputs['angle'].iae:.4f}")
-            if m.terminations:  # its IAE stops at the end: a cost the IAE does not show
-                cells[-1] += f" ({m.terminations} of {m.episodes} ended early)"
-                ended = True
-        change[scenario] = 100 * (
-            rows["hysteresis"].outputs["angle"].iae / rows["lqi"].outputs["angle"].iae - 1
-        )
+        rows = {c: results[scenario][c] for c in ("pid", "lqi", "hysteresis")}
+        iae = {c: m.outputs["angle"].iae for c, m in rows.items()}
+        change[scenario] = 100 * (iae["hysteresis"] / iae["lqi"] - 1)
+        # an episode's IAE stops where it ends: a cost the IAE does not show
+        cells = [
+            f"{iae[c]:.4f}" + (f" ({m.terminations} of {m.episodes} ended early)" if m.terminations else "")
+            for c, m in rows.items()
+        ]
+        ended = ended or any(m.terminations for m in rows.values())
         lines.append(f"| {scenario} | {' | '.join(cells)} | {change[scenario]:+.1f} % |")
     if ended:
         lines += [

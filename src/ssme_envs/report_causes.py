@@ -6,6 +6,7 @@ of the scenario showed, written down."""
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable
 
@@ -62,7 +63,10 @@ def _growth(results: EvaluationResult, scenario: str, controller: str) -> str:
     return f"the oscillation grows {where}, FPOV at its limit {100 * at_limit:.0f} % of the time"
 
 
-def _coupled_radii(env_id: str, scenario: str, gains_from: str, powers: list[float | None]) -> list[float]:
+@functools.cache  # each line of a scenario's causes asks again (pi and pi:truth, four missions)
+def _coupled_radii(
+    env_id: str, scenario: str, gains_from: str, powers: tuple[float | None, ...]
+) -> tuple[float, ...]:
     """Spectral radius of the decoupled PI's loop (SIMC gains on the ``gains_from`` design model at
     the scenario's power) closed around the whole linear truth at each of ``powers`` (None: the
     scenario's own), cross-coupling included (:func:`agents.pid.coupled_radius`)."""
@@ -73,7 +77,7 @@ def _coupled_radii(env_id: str, scenario: str, gains_from: str, powers: list[flo
     env = make_env(env_id, scenario, 1, None)
     try:
         kc, ki = diagonal_simc(linear_design(env, gains_from))
-        return [coupled_radius(linear_design(env, "truth", power=p), kc, ki) for p in powers]
+        return tuple(coupled_radius(linear_design(env, "truth", power=p), kc, ki) for p in powers)
     finally:
         env.close()
 
@@ -81,7 +85,7 @@ def _coupled_radii(env_id: str, scenario: str, gains_from: str, powers: list[flo
 def _pi_coupling(results: EvaluationResult, scenario: str, controller: str) -> str:
     from agents.lqi import schedule_levels
 
-    levels = schedule_levels("truth").tolist()
+    levels = tuple(schedule_levels("truth").tolist())
     radii = _coupled_radii(results.env_id, scenario, "identified", levels)
     unstable = [level for level, r in zip(levels, radii, strict=True) if r > 1.0]
     where = (
@@ -100,7 +104,7 @@ def _pi_coupling(results: EvaluationResult, scenario: str, controller: str) -> s
 
 def _pi_bucket(results: EvaluationResult, scenario: str, controller: str) -> str:
     identified, truth = (
-        _coupled_radii(results.env_id, scenario, gains, [None])[0] for gains in ("identified", "truth")
+        _coupled_radii(results.env_id, scenario, gains, (None,))[0] for gains in ("identified", "truth")
     )
     cure = (
         "tuning at the operating point does not make it stable, detuning does (EngineThrottle's "

@@ -45,7 +45,6 @@ Kalman filter", Modeling, Identification and Control 30(2), 2009.
 
 from __future__ import annotations
 
-import functools
 import math
 
 import numpy as np
@@ -159,10 +158,6 @@ def _largest_drop(singular_values: np.ndarray, candidates: list[int]) -> int:
     """The candidate order at the largest drop in log10 of the normalized singular values."""
     logs = np.log10(np.maximum(singular_values / singular_values[0], np.finfo(float).tiny))
     return candidates[int(np.argmax([logs[n - 1] - logs[n] for n in candidates]))]
-
-
-def _record_score(u: np.ndarray, y: np.ndarray, model: InnovationsModel, first: int) -> float | None:
-    return record_bic(model, u, y, first)
 
 
 def _identify_once(
@@ -343,9 +338,11 @@ def dsr_e(
     def one_pass(past: int, future: int) -> tuple[InnovationsModel, np.ndarray, int, bool]:
         return _identify_once(u, y, dt, past, future, order, max_order)
 
+    def score(model: InnovationsModel, first: int) -> float | None:
+        return record_bic(model, u, y, first)
+
     try:  # an unstable trial's unit responses overflow: its ValueError says so, not a RuntimeWarning
         with np.errstate(over="ignore", invalid="ignore"):
-            score = functools.partial(_record_score, u, y)
             fit = refined_fit(one_pass, n_samples, m, p, past, future, past_horizon is None, score)
             error = None
     except ValueError as exc:

@@ -96,9 +96,8 @@ def default_past(n_samples: int, m: int, p: int, future: int) -> int:
 
 
 def refined_fit(
-    one_pass: Pass, n_samples: int, m: int, p: int, past: int, future: int, refine: bool,
-    score: Score | None = None,
-) -> HorizonFit:  # fmt: skip
+    one_pass: Pass, n_samples: int, m: int, p: int, past: int, future: int, refine: bool, score: Score
+) -> HorizonFit:
     """A first pass at ``past``, then (``refine``: the past horizon is automatic) up to
     ``HORIZON_REFINEMENTS`` longer past horizons, each until ``rho(A - K C)^J`` reaches
     ``PREDICTOR_DECAY``; a refined pass that fails or turns a stable ``A`` unstable is not kept,
@@ -123,16 +122,21 @@ def refined_fit(
                 refined = one_pass(wanted, future)
             except ValueError:  # the longer horizon's model fails where this one stands: keep it
                 break
-            if spectral_radius(refined[0].A) >= 1.0 > spectral_radius(model.A):  # nor stable for unstable
-                break
-            if score is not None and refined[2] != found and _scored_worse(score, refined[0], model, wanted):
+            if _turns_unstable(refined[0], model) or (
+                refined[2] != found and _scored_worse(score, refined[0], model, wanted)
+            ):
                 break
             past = wanted
             model, singular_values, found, noise_free = refined
     fit = HorizonFit(model, singular_values, found, past, future)
-    if refine and not noise_free and score is not None:
+    if refine and not noise_free:
         fit = uncapped_alternative(one_pass, fit, n_samples, m, p, score)
     return fit
+
+
+def _turns_unstable(new: InnovationsModel, old: InnovationsModel) -> bool:
+    """Whether ``new`` has an unstable ``A`` where ``old``'s is stable (a pass never kept)."""
+    return spectral_radius(new.A) >= 1.0 > spectral_radius(old.A)
 
 
 def _scored_worse(score: Score, new: InnovationsModel, old: InnovationsModel, first: int) -> bool:
@@ -152,16 +156,16 @@ def uncapped_alternative(
     records: median fresh-record error 0.22 at the capped horizon, 0.020 with this pass,
     ``experiments/results/short_record_subspace.md``)."""
     past = min(rule_past(fit.future), past_horizon_cap(n_samples, m, p, fit.future, MIN_COLUMNS_PER_ROW))
-    if past <= fit.past or fit.past >= rule_past(fit.future):
+    if past <= fit.past:  # the record did not cap the first pass below the rule
         return fit
     try:
         with np.errstate(over="ignore", invalid="ignore"):  # as for the first pass
             trial = HorizonFit(*one_pass(past, fit.future)[:3], past, fit.future)
     except ValueError:
         return fit
-    if spectral_radius(trial.model.A) >= 1.0 > spectral_radius(fit.model.A):  # as refined_fit's rule
+    if _turns_unstable(trial.model, fit.model) or _scored_worse(score, trial.model, fit.model, past):
         return fit
-    return fit if _scored_worse(score, trial.model, fit.model, past) else trial
+    return trial
 
 
 def retry_horizons(
