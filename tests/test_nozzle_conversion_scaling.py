@@ -98,7 +98,7 @@ def nozzle_record():
 
 @pytest.mark.parametrize(
     ("k_u", "k_y", "noise"),
-    [(9, 0, "white"), (13, -3, "innovations")],  # torque over angle RMS: spread 9e13, 9e20
+    [(9, 0, "white"), (13, -3, "innovations"), (11, -2, "sieve")],  # torque over angle RMS: 9e13-9e20
 )
 def test_bootstrap_standard_errors_follow_the_units(nozzle_record, k_u, k_y, noise):
     """The record in N m and rad (spread 9e4, used as it is) against the same record with the

@@ -149,6 +149,14 @@ def build_parser() -> argparse.ArgumentParser:
         default=0.35,
         help="the A that fixes the Table 1 form (default: %(default)s)",
     )
+    nozzle.add_argument(
+        "--bootstrap-noise",
+        choices=("white", "sieve", "innovations"),  # identification.nozzle_uncertainty.NOISE_MODELS
+        default="white",
+        help="how the bootstrap of J, b, k's standard errors resamples the noise: white (white sensor "
+        "noise), sieve (coloured sensor noise: an AR sieve of the linear model's output error) or "
+        "innovations (through DSR_e's noise model) (default: %(default)s)",
+    )
 
     bench = commands.add_parser(
         "bench",

@@ -148,8 +148,15 @@ def identify_nozzle(args: argparse.Namespace) -> int:
             seed=args.seed,
             normalization_a=args.normalization_a,
             progress=print,
+            bootstrap_noise=args.bootstrap_noise,
         )
     lin = run.identified.model.linear
+    if args.data is not None:  # the bench's sensor noise is white: its colour is the hysteresis
+        from ssme_envs.identification.nozzle_pipeline import coloured_error_note
+
+        note = coloured_error_note(run.identified.model.fit["dsr_e"])
+        if note is not None:
+            print(note)
     print(f"linear: J {lin['J']:.4g} kg m^2, b {lin['b']:.4g} N m s/rad, k {lin['k']:.4g} N m/rad")
     print(f"Bouc-Wen: {run.identified.bouc_wen.reason}")
     print(f"done in {run.seconds:.1f} s; wrote {args.out / 'model.json'} and {run.report}")

@@ -161,7 +161,8 @@ class NozzleRun:
 
 
 def nozzle_into(work: Path, records: dict[str, Any] | None, seed: int | None, workers: int,
-                 normalization_a: float | None, note: str | None, progress: Progress) -> Any:  # fmt: skip
+                 normalization_a: float | None, note: str | None, progress: Progress,
+                 bootstrap_noise: str = "white") -> Any:  # fmt: skip
     """Identify the nozzle (the embedded bench test when ``records`` is None) into ``work``."""
     from ssme_envs.identification import nozzle_pipeline as npipe
     from ssme_envs.identification.nozzle_report import write_nozzle_report
@@ -183,14 +184,14 @@ def nozzle_into(work: Path, records: dict[str, Any] | None, seed: int | None, wo
             f"a PRBS torque keeping the angle within +-{npipe.RANGE_DEG:g} deg, {bench}. Seed {seed}."
         )
         progress(f"simulating the bench test ({bench}) and identifying ...")
-        ident, records = npipe.run_default(seed, workers, normalization_a)
+        ident, records = npipe.run_default(seed, workers, normalization_a, bootstrap_noise=bootstrap_noise)
     else:
         progress(
             "identifying: DSR_e linear model, then the Bouc-Wen joint (evolutionary search, least squares)"
         )
         ident = npipe.identify_nozzle(
             records["identification"], seed=seed, workers=workers, normalization_A=normalization_a,
-            progress=progress,
+            progress=progress, bootstrap_noise=bootstrap_noise,
         )  # fmt: skip
         if "validation" in records:
             ident.model.fit["validation_record"] = npipe.validate_nozzle(ident.model, records["validation"])
@@ -215,6 +216,7 @@ def identify_nozzle(
     seed: int | None = None,
     normalization_a: float | None = None,
     progress: Progress = _silent,
+    bootstrap_noise: str = "white",
 ) -> NozzleRun:
     """Identify the movable nozzle (DSR_e linear model and Bouc-Wen joint); write model.json,
     report.md and figures.
@@ -230,13 +232,20 @@ def identify_nozzle(
         A second record to validate on.
     normalization_a : float, optional
         The A that fixes the Table 1 form of the Bouc-Wen joint (default 0.35).
+    bootstrap_noise : {"white", "sieve", "innovations"}
+        How the bootstrap of J, b, k's standard errors resamples the noise: white (sensor noise
+        that is white), an AR sieve of the linear model's output error (coloured sensor noise),
+        or through DSR_e's noise model
+        (:func:`~ssme_envs.identification.nozzle_uncertainty.dsr_e_uncertainty`).
 
     Returns
     -------
     NozzleRun
     """
     from ssme_envs.identification import nozzle_pipeline as npipe
+    from ssme_envs.identification.nozzle_uncertainty import check_noise_model
 
+    check_noise_model(bootstrap_noise, "bootstrap_noise")  # before the record is read
     start = time.perf_counter()
     out_dir = Path(out_dir)
     records, note = None, None
@@ -248,7 +257,7 @@ def identify_nozzle(
             records["validation"] = check
         note = f"Data: {data}."
     with output_directory(out_dir, {"data": data, "validate": validate}) as work:
-        ident = nozzle_into(work, records, seed, workers, normalization_a, note, progress)
+        ident = nozzle_into(work, records, seed, workers, normalization_a, note, progress, bootstrap_noise)
     return NozzleRun(ident, out_dir / "report.md", time.perf_counter() - start)
 
 

@@ -27,6 +27,7 @@ from ssme_envs.identification.bouc_wen import (
     remove_bias,
 )
 from ssme_envs.identification.metrics import fit_percent
+from ssme_envs.identification.noise_sieve import fit_sieve
 from ssme_envs.identification.nozzle_bench import (
     BENCH_SAMPLES,
     DECIMATION,
@@ -47,6 +48,7 @@ from ssme_envs.identification.nozzle_bench import (
 from ssme_envs.identification.nozzle_uncertainty import (
     DEFAULT_REPLICATES,
     BootstrapUncertainty,
+    check_noise_model,
     dsr_e_uncertainty,
 )
 from ssme_envs.identification.subspace import InnovationsModel, SubspaceResult, dsr_e, second_order_parameters
@@ -61,6 +63,9 @@ from ssme_envs.models.nozzle import (
 )
 from ssme_envs.models.uncertainty import ParameterUncertainty
 
+# The output error's long-run variance over its variance above which a note calls it coloured:
+# AR(1) noise of coefficient 0.6, under which white resampling halves the standard error of a mean.
+COLOURED_LONG_RUN_RATIO = 4.0
 # Simulated acquisitions whose mean is the acquisition chain's bias on J, b, k.
 BIAS_DRAWS = 8
 BOUC_WEN_METHOD = (
@@ -77,6 +82,45 @@ class NozzleIdentification:
     linear_uncertainty: BootstrapUncertainty | None = None
 
 
+def output_error_colour(residual: np.ndarray) -> dict[str, float | int]:
+    """How coloured the linear model's output error (rad, (T,)) is: its lag-1 autocorrelation,
+    the order of its AR sieve and the sieve's long-run variance over its variance (1 for white
+    noise; :class:`~ssme_envs.identification.noise_sieve.ARSieve`)."""
+    if not np.ptp(residual) > 0:  # an exact fit: nothing to colour
+        return {"lag1_autocorrelation": 0.0, "sieve_order": 0, "long_run_ratio": 1.0}
+    sieve = fit_sieve(residual)
+    return {
+        "lag1_autocorrelation": sieve.lag1,
+        "sieve_order": sieve.order,
+        "long_run_ratio": sieve.long_run_ratio,
+    }
+
+
+def colour_figures(colour: dict) -> str:
+    """:func:`output_error_colour`'s figures as the CLI and the report give them."""
+    return (
+        f"lag-1 autocorrelation {colour['lag1_autocorrelation']:.2f}, long-run variance "
+        f"{colour['long_run_ratio']:.3g} times its variance, AR({colour['sieve_order']}) sieve; 1 for "
+        "white noise"
+    )
+
+
+def coloured_error_note(dsr_e_fit: dict) -> str | None:
+    """A note where the linear model's output error is coloured (long-run ratio above
+    ``COLOURED_LONG_RUN_RATIO``) and the bootstrap resampled it as white noise; else None.
+    ``dsr_e_fit``: a model's ``fit["dsr_e"]``."""
+    colour = dsr_e_fit.get("output_error")
+    noise = dsr_e_fit.get("bootstrap", {}).get("noise")
+    if colour is None or noise != "white" or not colour["long_run_ratio"] > COLOURED_LONG_RUN_RATIO:
+        return None
+    return (
+        f"note: the linear model's output error is coloured ({colour_figures(colour)}), and J, b, "
+        "k's standard errors resampled it as white: "
+        "they are too narrow if the sensor noise is coloured. --bootstrap-noise sieve keeps the "
+        "colour (and counts structure the linear model lacks, a hysteresis, as noise too)"
+    )
+
+
 def _finite_or_none(values: dict[str, float]) -> dict[str, float | None]:
     """JSON has no inf: an undetermined parameter's standard error is written as null."""
     return {key: (float(v) if np.isfinite(v) else None) for key, v in values.items()}
@@ -90,6 +134,7 @@ def identify_nozzle(
     replicates: int = DEFAULT_REPLICATES,
     bench_noise: float | None = None,
     progress: Callable[[str], None] | None = None,
+    bootstrap_noise: str = "white",
 ) -> NozzleIdentification:
     """DSR_e second-order linear model (as in the paper, for J, b, k) and the Bouc-Wen joint fit.
 
@@ -103,8 +148,12 @@ def identify_nozzle(
     parameters (:func:`bouc_wen_acquisition_bias`, one noise-free acquisition and refit; the
     covariance kept); the discrete model stays what the data give. ``progress``: called with a
     line before each stage, with the bootstrap's expected time (its cost grows with the record).
+    ``bootstrap_noise``: how the bootstrap resamples the noise (``dsr_e_uncertainty``'s ``noise``);
+    the fit records the colour of the linear model's output error either way
+    (``fit["dsr_e"]["output_error"]``, :func:`output_error_colour`).
     """
     check_torque_record(record.tau, record.beta, names=(record.input_name, record.output_name))
+    check_noise_model(bootstrap_noise, "bootstrap_noise")
     say = progress or (lambda line: None)
     start = time.perf_counter()
     subspace = dsr_e(record.tau, record.beta, record.dt, order=2)
@@ -122,8 +171,9 @@ def identify_nozzle(
             f"(up to about {replicates * once / max(workers, 1):.2g} s)"
         )
         boot = dsr_e_uncertainty(
-            record.tau, record.beta, record.dt, subspace, replicates=replicates, seed=seed, workers=workers
-        )
+            record.tau, record.beta, record.dt, subspace, replicates=replicates, seed=seed, workers=workers,
+            noise=bootstrap_noise,
+        )  # fmt: skip
     if boot is not None and bias is not None:
         boot = dataclasses.replace(
             boot,
@@ -154,6 +204,7 @@ def identify_nozzle(
             "resonance_frequency_hz": tf["resonance_frequency_hz"],
             "damping_ratio": tf["damping_ratio"],
             "fit_percent": float(fit_percent(record.beta, sim_linear)),
+            "output_error": output_error_colour(record.beta - sim_linear),
             **({} if bias is None else {"acquisition_bias": bias}),
             **(
                 {}
@@ -164,6 +215,7 @@ def identify_nozzle(
                         "replicates": len(boot.replicates),
                         "failed": boot.failed,
                         "noise_std": boot.noise_std,
+                        "noise": bootstrap_noise,
                     },
                 }
             ),
@@ -253,13 +305,15 @@ def run_default(
     workers: int = 2,
     normalization_A: float = DEFAULT_NORMALIZATION_A,
     truth: str = "table1",
+    bootstrap_noise: str = "white",
 ) -> tuple[NozzleIdentification, dict[str, NozzleRecord]]:
     """The embedded bench test of a nozzle: identification and validation records.
 
     ``truth``: ``"table1"`` (Table 1's Bouc-Wen nozzle, the packaged ``nozzle_identified.json``)
     or ``"strong"`` (:func:`strong_hysteresis_nozzle`, ``nozzle_strong_identified.json``). The
     model's ``fit`` carries the validation figures; wall time is left out so that the same seed
-    gives the same model file.
+    gives the same model file. ``bootstrap_noise``: as :func:`identify_nozzle`'s (the bench's
+    sensor noise is white, and its model's output error is coloured by the hysteresis).
     """
     truths = {"table1": published_nozzle("bouc_wen"), "strong": strong_hysteresis_nozzle()}
     if truth not in truths:
@@ -275,6 +329,7 @@ def run_default(
         workers=workers,
         normalization_A=normalization_A,
         bench_noise=SENSOR_NOISE,
+        bootstrap_noise=bootstrap_noise,
     )
     ident.model.fit["bouc_wen"].pop("seconds")
     ident.model.fit["validation_record"] = validate_nozzle(ident.model, records["validation"])

@@ -12,6 +12,7 @@ from ssme_envs.identification.metrics import fit_percent
 from ssme_envs.identification.nozzle_pipeline import (
     NozzleIdentification,
     NozzleRecord,
+    colour_figures,
     simulate_joint,
     simulate_linear_model,
 )
@@ -175,9 +176,27 @@ def _uncertainty_note(ident: NozzleIdentification) -> list[str]:
         f"{boot.noise_std:.3g} rad), not the systematic error of a second-order model of this record "
         "(a hysteretic joint's linearization"
         + ("" if bias is not None else ", a decimation filter's distortion")
-        + ").",
+        + ")."
+        + _colour_sentence(ident.model.fit["dsr_e"]),
         "",
     ]
+
+
+def _colour_sentence(dsr_e_fit: dict) -> str:
+    """The output error's colour (``fit.dsr_e.output_error``) and what it means for the standard
+    errors; empty for a model.json written before the figures were kept."""
+    colour = dsr_e_fit.get("output_error")
+    if colour is None:
+        return ""
+    text = f" The linear model's output error: {colour_figures(colour)}."
+    if "acquisition_bias" in dsr_e_fit:  # the embedded bench, whose sensor noise is white
+        text += " The bench's sensor noise is white: the colour is what the linear model leaves out."
+    elif dsr_e_fit["bootstrap"].get("noise") == "white":
+        text += (
+            " Resampled as white noise, the standard errors hold for white sensor noise and are too "
+            "narrow under coloured sensor noise (`--bootstrap-noise sieve` keeps the colour)."
+        )
+    return text
 
 
 def _bouc_wen_section(bw: BoucWenFit, bias: dict[str, float] | None = None) -> list[str]:

@@ -54,13 +54,14 @@ import numpy as np
 import scipy.signal
 
 from ssme_envs.identification.channel_scales import equilibrated
+from ssme_envs.identification.noise_sieve import ARSieve, fit_sieve
 from ssme_envs.identification.subspace import SubspaceResult, dsr_e, second_order_parameters
 from ssme_envs.identification.subspace_checks import arx_innovations
 from ssme_envs.models.statespace import check_dt
 from ssme_envs.models.uncertainty import ParameterUncertainty
 
 PARAMETERS = ("J", "b", "k")
-NOISE_MODELS = ("white", "innovations")
+NOISE_MODELS = ("white", "innovations", "sieve")
 DEFAULT_REPLICATES = 100
 MIN_REPLICATES = 10
 # More failed replicates than this fraction means the identification is fragile on this record.
@@ -126,12 +127,17 @@ class _Replicate:
         noise_filter: tuple[np.ndarray, np.ndarray] | None,
         dt: float,
         structure: tuple[int, int, int],
+        sieve: ARSieve | None = None,
     ) -> None:
         self.u, self.clean, self.noise, self.noise_filter = u, clean, noise, noise_filter
-        self.dt, self.structure = dt, structure
+        self.dt, self.structure, self.sieve = dt, structure, sieve
 
     def __call__(self, seed: np.random.SeedSequence) -> np.ndarray | None:
-        draw = self.noise[np.random.default_rng(seed).integers(0, self.noise.size, self.clean.size)]
+        rng = np.random.default_rng(seed)
+        if self.sieve is not None:
+            draw = self.sieve.draw(rng, self.clean.size)
+        else:
+            draw = self.noise[rng.integers(0, self.noise.size, self.clean.size)]
         if self.noise_filter is not None:
             draw = scipy.signal.lfilter(*self.noise_filter, draw)
         order, past, future = self.structure
@@ -158,6 +164,13 @@ def _single_threaded_blas():
                 os.environ.pop(name, None)
             else:
                 os.environ[name] = value
+
+
+def check_noise_model(noise: object, name: str) -> str:
+    """``noise`` if it is one of :data:`NOISE_MODELS`, else a ValueError naming ``name``."""
+    if not isinstance(noise, str) or noise not in NOISE_MODELS:
+        raise ValueError(f"{name} must be one of {', '.join(NOISE_MODELS)}, got {noise!r}")
+    return noise
 
 
 def _count(value: int, name: str, least: int) -> int:
@@ -237,8 +250,7 @@ def dsr_e_uncertainty(
     dt = check_dt(dt)
     replicates = _count(replicates, "replicates", MIN_REPLICATES)
     workers = _count(workers, "workers", 1)
-    if noise not in NOISE_MODELS:
-        raise ValueError(f"noise must be one of {', '.join(NOISE_MODELS)}, got {noise!r}")
+    check_noise_model(noise, "noise")
     if u.size != y.size:
         raise ValueError(f"u has {u.size} samples but y has {y.size}")
     model = result.model
@@ -260,7 +272,12 @@ def dsr_e_uncertainty(
         num, den = scipy.signal.ss2tf(model.A, model.K, model.C, np.ones((1, 1)))
         noise_filter = (np.ravel(num), np.ravel(den))
     clean = model.simulate(u)[:, 0]
-    replicate = _Replicate(u, clean, residual, noise_filter, dt, (result.order, past, result.future_horizon))
+    sieve = None
+    if noise == "sieve":  # the output error's colour, kept: the model's own residual, not the ARX's
+        sieve = fit_sieve(y - clean)
+        residual = y - clean - np.mean(y - clean)
+    structure = (result.order, past, result.future_horizon)
+    replicate = _Replicate(u, clean, residual, noise_filter, dt, structure, sieve)
     seeds = np.random.SeedSequence(seed).spawn(replicates)
     if workers > 1:
         # The spawned workers read the BLAS setting when they load numpy. Their first act is to
@@ -288,10 +305,17 @@ def dsr_e_uncertainty(
             f"{failed} of {replicates} bootstrap records could not be identified as a second-order "
             "oscillator: the J, b, k of this record are fragile; check the record or the order"
         )
-    how = "as white output noise" if noise == "white" else "through the identified noise model"
+    if sieve is None:
+        how = "as white output noise" if noise == "white" else "through the identified noise model"
+        noise_source = f"the DSR_e innovations estimate resampled {how}"
+    else:
+        noise_source = (
+            f"an AR({sieve.order}) sieve of the model's output error (its innovations resampled and "
+            "filtered back)"
+        )
     method = (
-        f"residual bootstrap: {len(good)} records simulated from the identified model with the DSR_e "
-        f"innovations estimate resampled {how}, re-identified at order {result.order}, past horizon "
+        f"residual bootstrap: {len(good)} records simulated from the identified model with "
+        f"{noise_source}, re-identified at order {result.order}, past horizon "
         f"{past}, future horizon {result.future_horizon} (seed {seed}); sample covariance of J, b, k"
     )
     return BootstrapUncertainty(
