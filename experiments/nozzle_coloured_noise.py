@@ -17,6 +17,8 @@ too narrow.
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 import scipy.signal
 from tqdm import tqdm
@@ -65,16 +67,40 @@ def ratios(colour: float | None, mode: str, seeds: int) -> np.ndarray:
     return np.std(estimates, axis=0, ddof=1) / np.mean(errors, axis=0)
 
 
+def span(ratio: np.ndarray) -> str:
+    """The smallest and largest of J, b, k's ratios."""
+    return f"{min(ratio):.2f}-{max(ratio):.2f}"
+
+
 def main() -> None:
     parser = script_parser(__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int_within(2), default=24)
     args = parser.parse_args()
+    start = time.perf_counter()
+    print("# Nozzle J, b, k standard errors under coloured sensor noise\n")
+    print(
+        f"Command: `OMP_NUM_THREADS=1 python experiments/nozzle_coloured_noise.py --seeds {args.seeds}`. "
+        "Spread of the estimates over the seeds divided by their mean bootstrap standard error: 1 where "
+        "the intervals are right, above 1 where they are too narrow, below 1 where too wide (with "
+        f"{args.seeds} seeds the ratio itself scatters by about {1 / np.sqrt(2 * (args.seeds - 1)):.0%}).\n"
+    )
     print(f"{args.seeds} seeds, {SAMPLES} samples at {DT} s, sensor noise {NOISE:.0%} of the spread\n")
     print("| sensor noise | bootstrap noise | spread / standard error: J | b | k |")
     print("|---|---|---|---|---|")
+    found = {}
     for name, colour, mode in CASES:
-        r = ratios(colour, mode, args.seeds)
+        r = found[name, mode] = ratios(colour, mode, args.seeds)
         print(f"| {name} | {mode} | {r[0]:.2f} | {r[1]:.2f} | {r[2]:.2f} |")
+    coloured = "AR(1) 0.95"
+    print(
+        f"\nUnder AR(1) 0.95 sensor noise, resampling the ARX residuals as white output noise (the "
+        f"default) gives intervals {span(found[coloured, 'white'])} times too narrow; through the "
+        f"identified noise model, {span(found[coloured, 'innovations'])} (the order-2 innovations "
+        "model does not describe that noise); the AR sieve of the output error, "
+        f"{span(found[coloured, 'sieve'])}. On white noise the sieve gives {span(found['white', 'sieve'])} "
+        f"against the default's {span(found['white', 'white'])}. "
+        f"Run time {time.perf_counter() - start:.0f} s."
+    )
 
 
 if __name__ == "__main__":

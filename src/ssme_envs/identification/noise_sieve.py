@@ -34,27 +34,22 @@ class ARSieve:
     innovations : ndarray (T - p,)
         ``e`` of the record, centred and inflated by ``sqrt(n / (n - p))`` for the ``p``
         coefficients estimated, in the residuals' units.
-    variance : float
-        The residuals' variance (their lag-0 autocovariance), units squared.
     lag1 : float
         The residuals' lag-1 autocorrelation.
+    long_run_ratio : float
+        The autoregression's long-run variance ``var(e) / A(1)^2`` over the residuals' variance:
+        1 for white noise, ``(1 + a) / (1 - a)`` for AR(1) noise of coefficient a, the factor by
+        which resampling the residuals as white understates the variance of their mean.
     """
 
     denominator: np.ndarray
     innovations: np.ndarray
-    variance: float
     lag1: float
+    long_run_ratio: float
 
     @property
     def order(self) -> int:
         return len(self.denominator) - 1
-
-    @property
-    def long_run_ratio(self) -> float:
-        """The autoregression's long-run variance ``var(e) / A(1)^2`` over the residuals'
-        variance: 1 for white noise, ``(1 + a) / (1 - a)`` for AR(1) noise of coefficient a, the
-        factor by which resampling them as white understates the variance of a mean."""
-        return float(np.var(self.innovations) / np.sum(self.denominator) ** 2 / self.variance)
 
     def draw(self, rng: np.random.Generator, size: int) -> np.ndarray:
         """``size`` samples of the coloured noise: ``size`` burn-in samples then ``size`` kept,
@@ -89,22 +84,29 @@ def fit_sieve(v: np.ndarray, max_order: int | None = None) -> ARSieve:
     if isinstance(limit, bool) or not isinstance(limit, int | np.integer) or not 0 <= limit <= n // 4:
         raise ValueError(f"max_order must be an integer in 0..{n // 4}, got {max_order!r}")
     v = v - v.mean()
-    gamma = np.correlate(v, v, mode="full")[n - 1 : n + limit] / n  # biased: a stable polynomial
-    if not gamma[0] > 0:
+    scale = float(np.max(np.abs(v)))
+    if not scale > 0:
         raise ValueError("the residuals are constant: there is no noise to resample")
+    z = v / scale  # the coefficients do not depend on the units; 1e-300 or 1e300 rad stay finite
+    # biased autocovariance (a stable polynomial), by FFT for long records
+    gamma = scipy.signal.correlate(z, z, mode="full")[n - 1 : n + max(limit, 1)] / n
     best, best_score = np.ones(1), n * np.log(gamma[0])
     for p in range(1, limit + 1):
-        a = scipy.linalg.solve_toeplitz(gamma[:p], gamma[1 : p + 1])
+        try:
+            a = scipy.linalg.solve_toeplitz(gamma[:p], gamma[1 : p + 1])
+        except np.linalg.LinAlgError:  # exactly predictable at this order: keep the last
+            break
         variance = gamma[0] - a @ gamma[1 : p + 1]
-        if not variance > 0:  # the record is exactly predictable at this order: keep the last
+        if not variance > 0:
             break
         score = n * np.log(variance) + 2 * p
         if score < best_score:
             best, best_score = np.concatenate(([1.0], -a)), score
-    e = scipy.signal.lfilter(best, [1.0], v)[best.size - 1 :]
+    e = scipy.signal.lfilter(best, [1.0], z)[best.size - 1 :]
     kept = e.size
     e = (e - e.mean()) * np.sqrt(kept / max(kept - (best.size - 1), 1))
-    return ARSieve(best, e, float(gamma[0]), float(gamma[1] / gamma[0]) if limit else 0.0)
+    ratio = float(np.var(e) / np.sum(best) ** 2 / gamma[0])
+    return ARSieve(best, e * scale, float(gamma[1] / gamma[0]), ratio)
 
 
 __all__ = ["ARSieve", "fit_sieve", "max_sieve_order"]
