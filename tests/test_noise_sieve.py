@@ -74,15 +74,46 @@ def test_on_white_noise_the_sieve_is_the_plain_resampling(seed):
     assert coloured_error_note({"output_error": colour, "bootstrap": {"noise": "white"}}) is None
 
 
-def test_the_note_names_coloured_noise_only_where_it_was_resampled_as_white():
+def test_the_note_names_coloured_noise_where_the_bootstrap_did_not_keep_its_colour():
     v, a = _ar_noise([0.95], 4000, 5)
     colour = output_error_colour(v)
     assert colour["long_run_ratio"] == pytest.approx(_long_run_ratio(a), rel=0.35)  # 39 for 0.95
-    note = coloured_error_note({"output_error": colour, "bootstrap": {"noise": "white"}})
-    assert note is not None and note.startswith("note: ") and "--bootstrap-noise sieve" in note
+    for noise in ("white", "innovations"):
+        note = coloured_error_note({"output_error": colour, "bootstrap": {"noise": noise}})
+        assert note is not None and note.startswith("note: ") and "--bootstrap-noise sieve" in note
+        assert f"bootstrapped with {noise} noise" in note and "\n" not in note
     assert coloured_error_note({"output_error": colour, "bootstrap": {"noise": "sieve"}}) is None
     exact = output_error_colour(np.zeros(100))
     assert exact == {"lag1_autocorrelation": 0.0, "sieve_order": 0, "long_run_ratio": 1.0}
+    assert output_error_colour(np.r_[np.zeros(50), np.nan]) is None  # an unstable model's simulation
+
+
+@pytest.mark.parametrize("misfit", ["ramp", "slow sine"])
+def test_a_smooth_misfit_is_drawn_with_its_variance_and_called_coloured(misfit):
+    """A smooth output error (a drift the linear model leaves, little sensor noise): the draws
+    carry the record's variance (numpy's), not the sliver the filtered record keeps, and the
+    long-run ratio calls it coloured."""
+    t = np.arange(4000)
+    noise = 1e-3 * np.random.default_rng(2).standard_normal(t.size)
+    v = (1e-3 * t if misfit == "ramp" else np.sin(2 * np.pi * t / 3000)) + noise
+    sieve = fit_sieve(v)
+    draws = np.concatenate([sieve.draw(np.random.default_rng(k), t.size) for k in range(50)])
+    assert np.var(draws) == pytest.approx(np.var(v), rel=0.25)
+    assert sieve.long_run_ratio > 100
+    assert coloured_error_note({"output_error": output_error_colour(v), "bootstrap": {"noise": "white"}})
+
+
+def test_draws_start_stationary():
+    """AR(1) 0.99 noise: the first sample of 400 draws of 20 samples each has the process's
+    stationary variance (sigma^2 / (1 - a^2), computed from the fitted coefficient), as the
+    last does: the burn-in settles the filter."""
+    v, _ = _ar_noise([0.99], 20000, 4)
+    sieve = fit_sieve(v)
+    a = -sieve.denominator[1]
+    stationary = np.var(sieve.innovations) / (1 - a * a) if sieve.order == 1 else np.var(v)
+    draws = np.array([sieve.draw(np.random.default_rng(k), 20) for k in range(400)])
+    assert np.var(draws[:, 0]) == pytest.approx(stationary, rel=0.25)
+    assert np.var(draws[:, -1]) == pytest.approx(stationary, rel=0.25)
 
 
 def test_same_seed_same_draws():
@@ -146,4 +177,26 @@ def test_the_sieve_bootstrap_gives_the_scatter_of_fresh_coloured_noise():
     sieve = dsr_e_uncertainty(u, y, DT, fit, replicates=30, seed=3, noise="sieve").standard_errors
     white = dsr_e_uncertainty(u, y, DT, fit, replicates=30, seed=3).standard_errors
     assert np.all(sieve / brute > 1 / 1.6) and np.all(sieve / brute < 1.6), sieve / brute
+    # (resampling the output error itself as white noise falls in that window too, on J and k
+    # short and on b long: the sieve's colour is held by the tests above)
     assert brute[0] / white[0] > 2 and brute[2] / white[2] > 2, brute / white
+
+
+def test_the_cli_offers_the_bootstraps_noise_models_with_the_librarys_default():
+    """The CLI writes the choices out (it does not import identification): they are the
+    library's, and its default is ``identify_nozzle``'s."""
+    import argparse
+    import inspect
+
+    from ssme_envs.cli import build_parser
+    from ssme_envs.identification.jobs import identify_nozzle
+    from ssme_envs.identification.nozzle_uncertainty import NOISE_MODELS
+
+    def sub(parser: argparse.ArgumentParser, name: str) -> argparse.ArgumentParser:
+        (commands,) = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+        return commands.choices[name]
+
+    nozzle = sub(sub(build_parser(), "identify"), "nozzle")
+    (option,) = [a for a in nozzle._actions if a.dest == "bootstrap_noise"]
+    assert tuple(option.choices) == NOISE_MODELS
+    assert option.default == inspect.signature(identify_nozzle).parameters["bootstrap_noise"].default

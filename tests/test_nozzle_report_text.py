@@ -57,6 +57,7 @@ def test_the_packaged_models_output_error_colour_is_the_bench_records():
     [
         (True, "white", "The bench's sensor noise is white"),
         (False, "white", "`--bootstrap-noise sieve` keeps the colour"),
+        (False, "innovations", "`--bootstrap-noise sieve` keeps the colour"),
         (False, "sieve", None),
     ],
 )
@@ -69,7 +70,8 @@ def test_the_report_says_what_the_colour_means_for_the_standard_errors(bench, no
         **({"acquisition_bias": {"J": 0.0, "b": 0.0, "k": 0.0}} if bench else {}),
     }
     text = _colour_sentence(fit)
-    assert "lag-1 autocorrelation 0.95, long-run variance 39 times its variance, AR(1) sieve" in text
+    figures = "lag-1 autocorrelation 0.95, long-run variance 39 times its variance (1 for white noise), AR(1)"
+    assert figures + " sieve" in text
     for phrase in ("The bench's sensor noise is white", "`--bootstrap-noise sieve` keeps the colour"):
         assert (phrase in text) == (phrase == says), phrase
     assert _colour_sentence({"bootstrap": {"noise": "white"}}) == ""  # a model.json from before

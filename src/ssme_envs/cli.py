@@ -151,11 +151,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     nozzle.add_argument(
         "--bootstrap-noise",
-        choices=("white", "sieve", "innovations"),  # identification.nozzle_uncertainty.NOISE_MODELS
+        choices=("white", "innovations", "sieve"),  # identification.nozzle_uncertainty.NOISE_MODELS
         default="white",
         help="how the bootstrap of J, b, k's standard errors resamples the noise: white (white sensor "
-        "noise), sieve (coloured sensor noise: an AR sieve of the linear model's output error) or "
-        "innovations (through DSR_e's noise model) (default: %(default)s)",
+        "noise), innovations (through DSR_e's noise model) or sieve (coloured sensor noise: an AR "
+        "sieve of the linear model's output error) (default: %(default)s)",
     )
 
     bench = commands.add_parser(

@@ -232,10 +232,10 @@ def identify_nozzle(
         A second record to validate on.
     normalization_a : float, optional
         The A that fixes the Table 1 form of the Bouc-Wen joint (default 0.35).
-    bootstrap_noise : {"white", "sieve", "innovations"}
+    bootstrap_noise : {"white", "innovations", "sieve"}
         How the bootstrap of J, b, k's standard errors resamples the noise: white (sensor noise
-        that is white), an AR sieve of the linear model's output error (coloured sensor noise),
-        or through DSR_e's noise model
+        that is white), through DSR_e's noise model, or an AR sieve of the linear model's output
+        error (coloured sensor noise); see
         (:func:`~ssme_envs.identification.nozzle_uncertainty.dsr_e_uncertainty`).
 
     Returns

@@ -11,7 +11,10 @@ sieve is the plain resampling.
 
 The coefficients are the Yule-Walker estimates (:func:`scipy.linalg.solve_toeplitz` on the
 biased autocovariance), whose polynomial has its roots inside the unit circle, so the filter
-is stable and, after a burn-in as long as the draw, stationary.
+is stable and, after a burn-in (as long as the draw, or as the slowest mode takes to settle),
+stationary. Yule-Walker understates strong
+colour on short records (the long-run ratio of AR(1) noise of coefficient 0.95 comes out near 23
+instead of 39 on 200 samples; 0.99 on 1000 samples, 121 instead of 199), and the intervals with it.
 """
 
 from __future__ import annotations
@@ -21,6 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 import scipy.signal
+
+MAX_SETTLING = 10**6  # the longest burn-in a draw takes (a mode at 1 - 7e-6)
 
 
 @dataclass(frozen=True, eq=False)
@@ -32,12 +37,13 @@ class ARSieve:
     denominator : ndarray (p + 1,)
         ``[1, a_1, ..., a_p]``: the filter ``1 / A(q)`` that colours white draws.
     innovations : ndarray (T - p,)
-        ``e`` of the record, centred and inflated by ``sqrt(n / (n - p))`` for the ``p``
-        coefficients estimated, in the residuals' units.
+        ``A(q) v`` of the record, centred and scaled to the fit's prediction error variance
+        ``s2_p``, in the residuals' units: the draws then have the record's variance (the
+        Yule-Walker model matches its autocovariances up to lag p).
     lag1 : float
         The residuals' lag-1 autocorrelation.
     long_run_ratio : float
-        The autoregression's long-run variance ``var(e) / A(1)^2`` over the residuals' variance:
+        The autoregression's long-run variance ``s2_p / A(1)^2`` over the residuals' variance:
         1 for white noise, ``(1 + a) / (1 - a)`` for AR(1) noise of coefficient a, the factor by
         which resampling the residuals as white understates the variance of their mean.
     """
@@ -51,11 +57,22 @@ class ARSieve:
     def order(self) -> int:
         return len(self.denominator) - 1
 
+    @property
+    def settling(self) -> int:
+        """Samples in which the filter's slowest mode decays to 1e-3 (at most ``MAX_SETTLING``)."""
+        if self.order == 0:
+            return 0
+        slowest = float(np.max(np.abs(np.roots(self.denominator))))
+        if not slowest > 0:
+            return self.order
+        return int(min(MAX_SETTLING, np.ceil(np.log(1e-3) / np.log(min(slowest, 1.0 - 1e-12)))))
+
     def draw(self, rng: np.random.Generator, size: int) -> np.ndarray:
-        """``size`` samples of the coloured noise: ``size`` burn-in samples then ``size`` kept,
-        the innovations resampled with replacement."""
-        e = self.innovations[rng.integers(0, self.innovations.size, 2 * size)]
-        return scipy.signal.lfilter([1.0], self.denominator, e)[size:]
+        """``size`` samples of the coloured noise, the innovations resampled with replacement and
+        filtered from rest, after a burn-in of ``max(size, settling)`` samples."""
+        burn = max(size, self.settling)
+        e = self.innovations[rng.integers(0, self.innovations.size, burn + size)]
+        return scipy.signal.lfilter([1.0], self.denominator, e)[burn:]
 
 
 def max_sieve_order(samples: int) -> int:
@@ -83,14 +100,15 @@ def fit_sieve(v: np.ndarray, max_order: int | None = None) -> ARSieve:
     limit = max_sieve_order(n) if max_order is None else max_order
     if isinstance(limit, bool) or not isinstance(limit, int | np.integer) or not 0 <= limit <= n // 4:
         raise ValueError(f"max_order must be an integer in 0..{n // 4}, got {max_order!r}")
-    v = v - v.mean()
     scale = float(np.max(np.abs(v)))
-    if not scale > 0:
+    z = v / scale if scale > 0 else v  # units-free: 1e-300 or 1e300 rad stay finite
+    z = z - z.mean()
+    if not np.any(z):
         raise ValueError("the residuals are constant: there is no noise to resample")
-    z = v / scale  # the coefficients do not depend on the units; 1e-300 or 1e300 rad stay finite
     # biased autocovariance (a stable polynomial), by FFT for long records
     gamma = scipy.signal.correlate(z, z, mode="full")[n - 1 : n + max(limit, 1)] / n
-    best, best_score = np.ones(1), n * np.log(gamma[0])
+    best, best_variance = np.ones(1), gamma[0]
+    best_score = n * np.log(best_variance)
     for p in range(1, limit + 1):
         try:
             a = scipy.linalg.solve_toeplitz(gamma[:p], gamma[1 : p + 1])
@@ -101,11 +119,15 @@ def fit_sieve(v: np.ndarray, max_order: int | None = None) -> ARSieve:
             break
         score = n * np.log(variance) + 2 * p
         if score < best_score:
-            best, best_score = np.concatenate(([1.0], -a)), score
+            best, best_variance, best_score = np.concatenate(([1.0], -a)), variance, score
+    # The record filtered by A(q), scaled to the fit's prediction error variance: on a smooth
+    # misfit (a drift) A(q) predicts the record itself far better than its autocovariances say,
+    # and draws of the raw filtered values would carry a fraction of the record's variance.
     e = scipy.signal.lfilter(best, [1.0], z)[best.size - 1 :]
-    kept = e.size
-    e = (e - e.mean()) * np.sqrt(kept / max(kept - (best.size - 1), 1))
-    ratio = float(np.var(e) / np.sum(best) ** 2 / gamma[0])
+    e = e - e.mean()
+    spread = np.sqrt(np.mean(e * e))
+    e = e * (np.sqrt(best_variance) / spread) if spread > 0 else np.full(e.size, np.sqrt(best_variance))
+    ratio = float(best_variance / np.sum(best) ** 2 / gamma[0])
     return ARSieve(best, e * scale, float(gamma[1] / gamma[0]), ratio)
 
 

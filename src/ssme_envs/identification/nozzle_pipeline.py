@@ -82,10 +82,13 @@ class NozzleIdentification:
     linear_uncertainty: BootstrapUncertainty | None = None
 
 
-def output_error_colour(residual: np.ndarray) -> dict[str, float | int]:
+def output_error_colour(residual: np.ndarray) -> dict[str, float | int] | None:
     """How coloured the linear model's output error (rad, (T,)) is: its lag-1 autocorrelation,
     the order of its AR sieve and the sieve's long-run variance over its variance (1 for white
-    noise; :class:`~ssme_envs.identification.noise_sieve.ARSieve`)."""
+    noise; :class:`~ssme_envs.identification.noise_sieve.ARSieve`). None where the error is not
+    finite (an unstable model's simulation)."""
+    if not np.all(np.isfinite(residual)):
+        return None
     if not np.ptp(residual) > 0:  # an exact fit: nothing to colour
         return {"lag1_autocorrelation": 0.0, "sieve_order": 0, "long_run_ratio": 1.0}
     sieve = fit_sieve(residual)
@@ -100,24 +103,28 @@ def colour_figures(colour: dict) -> str:
     """:func:`output_error_colour`'s figures as the CLI and the report give them."""
     return (
         f"lag-1 autocorrelation {colour['lag1_autocorrelation']:.2f}, long-run variance "
-        f"{colour['long_run_ratio']:.3g} times its variance, AR({colour['sieve_order']}) sieve; 1 for "
-        "white noise"
+        f"{colour['long_run_ratio']:.3g} times its variance (1 for white noise), "
+        f"AR({colour['sieve_order']}) sieve"
     )
 
 
-def coloured_error_note(dsr_e_fit: dict) -> str | None:
-    """A note where the linear model's output error is coloured (long-run ratio above
-    ``COLOURED_LONG_RUN_RATIO``) and the bootstrap resampled it as white noise; else None.
-    ``dsr_e_fit``: a model's ``fit["dsr_e"]``."""
+def unsieved_colour(dsr_e_fit: dict) -> bool:
+    """Whether a model's ``fit["dsr_e"]`` has a coloured output error (long-run ratio above
+    ``COLOURED_LONG_RUN_RATIO``) that its bootstrap did not resample with its colour."""
     colour = dsr_e_fit.get("output_error")
-    noise = dsr_e_fit.get("bootstrap", {}).get("noise")
-    if colour is None or noise != "white" or not colour["long_run_ratio"] > COLOURED_LONG_RUN_RATIO:
+    noise = dsr_e_fit.get("bootstrap", {}).get("noise", "sieve")
+    return colour is not None and noise != "sieve" and colour["long_run_ratio"] > COLOURED_LONG_RUN_RATIO
+
+
+def coloured_error_note(dsr_e_fit: dict) -> str | None:
+    """A note where :func:`unsieved_colour` (``dsr_e_fit``: a model's ``fit["dsr_e"]``); else None."""
+    if not unsieved_colour(dsr_e_fit):
         return None
     return (
-        f"note: the linear model's output error is coloured ({colour_figures(colour)}), and J, b, "
-        "k's standard errors resampled it as white: "
-        "they are too narrow if the sensor noise is coloured. --bootstrap-noise sieve keeps the "
-        "colour (and counts structure the linear model lacks, a hysteresis, as noise too)"
+        f"note: the linear model's output error is coloured ({colour_figures(dsr_e_fit['output_error'])}); "
+        f"J, b, k's standard errors, bootstrapped with {dsr_e_fit['bootstrap']['noise']} noise, are too "
+        "narrow if the sensor noise is coloured: --bootstrap-noise sieve keeps the colour (and counts "
+        "structure the linear model lacks, such as a hysteresis, as noise too)"
     )
 
 
@@ -192,6 +199,7 @@ def identify_nozzle(
         bw_bias = bouc_wen_acquisition_bias(record.tau, bw, seed, workers)
         bw = remove_bias(bw, bw_bias)
     sim_linear = linear.simulate(record.tau[:, None])[:, 0]
+    colour = output_error_colour(record.beta - sim_linear)
     fit = {
         "samples": int(record.tau.size),
         "dsr_e": {
@@ -204,7 +212,7 @@ def identify_nozzle(
             "resonance_frequency_hz": tf["resonance_frequency_hz"],
             "damping_ratio": tf["damping_ratio"],
             "fit_percent": float(fit_percent(record.beta, sim_linear)),
-            "output_error": output_error_colour(record.beta - sim_linear),
+            **({} if colour is None else {"output_error": colour}),
             **({} if bias is None else {"acquisition_bias": bias}),
             **(
                 {}

@@ -15,6 +15,7 @@ from ssme_envs.identification.nozzle_pipeline import (
     colour_figures,
     simulate_joint,
     simulate_linear_model,
+    unsieved_colour,
 )
 from ssme_envs.identification.report_figures import agg_pyplot
 from ssme_envs.identification.subspace import to_continuous
@@ -184,17 +185,18 @@ def _uncertainty_note(ident: NozzleIdentification) -> list[str]:
 
 def _colour_sentence(dsr_e_fit: dict) -> str:
     """The output error's colour (``fit.dsr_e.output_error``) and what it means for the standard
-    errors; empty for a model.json written before the figures were kept."""
+    errors; empty where the model.json has no such figures (written before they were kept, or an
+    output error that is not finite)."""
     colour = dsr_e_fit.get("output_error")
     if colour is None:
         return ""
     text = f" The linear model's output error: {colour_figures(colour)}."
     if "acquisition_bias" in dsr_e_fit:  # the embedded bench, whose sensor noise is white
         text += " The bench's sensor noise is white: the colour is what the linear model leaves out."
-    elif dsr_e_fit["bootstrap"].get("noise") == "white":
+    elif unsieved_colour(dsr_e_fit):
         text += (
-            " Resampled as white noise, the standard errors hold for white sensor noise and are too "
-            "narrow under coloured sensor noise (`--bootstrap-noise sieve` keeps the colour)."
+            f" Bootstrapped with {dsr_e_fit['bootstrap']['noise']} noise, the standard errors are too "
+            "narrow if the sensor noise is coloured (`--bootstrap-noise sieve` keeps the colour)."
         )
     return text
 
