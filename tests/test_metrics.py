@@ -360,6 +360,9 @@ def test_a_relay_limit_cycle_is_named_by_the_metrics():
     assert 0.7 < pc.limit_cycle_amplitude / np.median(np.ptp(tails, axis=0) / 2) < 1.45
 
 
+# cont2discrete's numerator of a strictly proper TF leads with a round-off zero, which scipy's
+# normalize warns of as it drops it: the response is exact
+@pytest.mark.filterwarnings("ignore::scipy.signal.BadCoefficients")
 @settings(deadline=None, max_examples=30)
 @given(
     at=st.integers(1, 60),
