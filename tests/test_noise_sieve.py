@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 
 from ssme_envs.identification import dsr_e, second_order_parameters
 from ssme_envs.identification.noise_sieve import fit_sieve, max_sieve_order
-from ssme_envs.identification.nozzle_pipeline import coloured_error_note, output_error_colour
+from ssme_envs.identification.nozzle_residuals import coloured_error_note, output_error_colour
 from ssme_envs.identification.nozzle_uncertainty import dsr_e_uncertainty
 from ssme_envs.models.nozzle import published_nozzle
 
@@ -71,20 +71,27 @@ def test_on_white_noise_the_sieve_is_the_plain_resampling(seed):
     draw = sieve.draw(np.random.default_rng(seed), 4000)
     assert abs(_autocorrelation(draw, 1)) < 0.1
     colour = output_error_colour(v)
-    assert coloured_error_note({"output_error": colour, "bootstrap": {"noise": "white"}}) is None
+    boot = {"noise": "white", "noise_std": float(np.std(v))}
+    assert coloured_error_note({"output_error": colour, "bootstrap": boot}) is None
 
 
 def test_the_note_names_coloured_noise_where_the_bootstrap_did_not_keep_its_colour():
     v, a = _ar_noise([0.95], 4000, 5)
     colour = output_error_colour(v)
     assert colour["long_run_ratio"] == pytest.approx(_long_run_ratio(a), rel=0.35)  # 39 for 0.95
+    innovations = float(np.std(v) * np.sqrt(1 - 0.95**2))  # what the ARX residuals would be
     for noise in ("white", "innovations"):
-        note = coloured_error_note({"output_error": colour, "bootstrap": {"noise": noise}})
+        boot = {"noise": noise, "noise_std": innovations}
+        note = coloured_error_note({"output_error": colour, "bootstrap": boot})
         assert note is not None and note.startswith("note: ") and "--bootstrap-noise sieve" in note
         assert f"bootstrapped with {noise} noise" in note and "\n" not in note
-    assert coloured_error_note({"output_error": colour, "bootstrap": {"noise": "sieve"}}) is None
+        assert ("times as large as the white noise" in note) == (noise == "white")  # 3.2 times
+    boot = {"noise": "sieve", "noise_std": innovations}
+    assert coloured_error_note({"output_error": colour, "bootstrap": boot}) is None
     exact = output_error_colour(np.zeros(100))
-    assert exact == {"lag1_autocorrelation": 0.0, "sieve_order": 0, "long_run_ratio": 1.0}
+    assert exact == {"std": 0.0, "lag1_autocorrelation": 0.0, "sieve_order": 0, "long_run_ratio": 1.0}
+    noiseless = {"noise": "white", "noise_std": 0.0}
+    assert coloured_error_note({"output_error": exact, "bootstrap": noiseless}) is None
     assert output_error_colour(np.r_[np.zeros(50), np.nan]) is None  # an unstable model's simulation
 
 
@@ -100,7 +107,24 @@ def test_a_smooth_misfit_is_drawn_with_its_variance_and_called_coloured(misfit):
     draws = np.concatenate([sieve.draw(np.random.default_rng(k), t.size) for k in range(50)])
     assert np.var(draws) == pytest.approx(np.var(v), rel=0.25)
     assert sieve.long_run_ratio > 100
-    assert coloured_error_note({"output_error": output_error_colour(v), "bootstrap": {"noise": "white"}})
+    boot = {"noise": "white", "noise_std": 1e-3}
+    assert coloured_error_note({"output_error": output_error_colour(v), "bootstrap": boot})
+
+
+def test_a_hum_or_an_error_larger_than_the_resampled_noise_gets_the_note():
+    """A narrow-band output error (a hum) has a long-run ratio below 1 but a lag 1 near 1; an
+    error five times the white noise the bootstrap resampled (an ARX that explained it away)
+    is named with that factor, colour or not."""
+    t = np.arange(4000) * 0.008
+    hum = 0.005 * np.sin(2 * np.pi * 3.0 * t)
+    colour = output_error_colour(hum)
+    assert colour["long_run_ratio"] < 1 and colour["lag1_autocorrelation"] > 0.9
+    note = coloured_error_note({"output_error": colour, "bootstrap": {"noise": "white", "noise_std": 1e-17}})
+    assert note is not None and "coloured" in note and "times as large" in note
+    white = np.random.default_rng(1).standard_normal(4000)
+    boot = {"noise": "white", "noise_std": float(np.std(white)) / 5}
+    note = coloured_error_note({"output_error": output_error_colour(white), "bootstrap": boot})
+    assert note is not None and "coloured" not in note and "5 times as large" in note
 
 
 def test_draws_start_stationary():

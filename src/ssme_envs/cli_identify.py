@@ -152,7 +152,7 @@ def identify_nozzle(args: argparse.Namespace) -> int:
         )
     lin = run.identified.model.linear
     if args.data is not None:  # the bench's sensor noise is white: its colour is the hysteresis
-        from ssme_envs.identification.nozzle_pipeline import coloured_error_note
+        from ssme_envs.identification.nozzle_residuals import coloured_error_note
 
         note = coloured_error_note(run.identified.model.fit["dsr_e"])
         if note is not None:

@@ -194,8 +194,10 @@ def _fit_bouc_wen(
     start = time.perf_counter()
     tau, x = check_torque_record(tau, x)
     dt = check_dt(dt)
-    if not normalization_A > 0:
-        raise ValueError(f"normalization_A must be positive, got {normalization_A!r}")
+    if isinstance(normalization_A, bool) or not (
+        isinstance(normalization_A, int | float | np.integer | np.floating) and 0 < normalization_A < np.inf
+    ):
+        raise ValueError(f"normalization_A must be a positive finite number, got {normalization_A!r}")
     amplitude = float(np.max(np.abs(x - x[0])))
     seg = slice(0, min(x.size, SEARCH_SAMPLES))
 

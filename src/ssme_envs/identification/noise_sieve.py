@@ -25,6 +25,8 @@ import numpy as np
 import scipy.linalg
 import scipy.signal
 
+from ssme_envs.identification.arguments import real_record
+
 MAX_SETTLING = 10**6  # the longest burn-in a draw takes (a mode at 1 - 7e-6)
 
 
@@ -91,7 +93,7 @@ def fit_sieve(v: np.ndarray, max_order: int | None = None) -> ARSieve:
         ``v`` not one finite channel of at least 8 samples, constant, or ``max_order`` not an
         integer in ``0..T / 4``.
     """
-    v = np.asarray(v, dtype=float)
+    v = np.asarray(real_record(v, "v", "channels"), dtype=float)
     if v.ndim != 1 or v.size < 8:
         raise ValueError(f"the residuals must be one channel of at least 8 samples, got shape {v.shape}")
     if not np.all(np.isfinite(v)):

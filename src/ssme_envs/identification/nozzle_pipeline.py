@@ -27,7 +27,6 @@ from ssme_envs.identification.bouc_wen import (
     remove_bias,
 )
 from ssme_envs.identification.metrics import fit_percent
-from ssme_envs.identification.noise_sieve import fit_sieve
 from ssme_envs.identification.nozzle_bench import (
     BENCH_SAMPLES,
     DECIMATION,
@@ -45,10 +44,12 @@ from ssme_envs.identification.nozzle_bench import (
     validation_experiment,
     write_nozzle_record,
 )
+from ssme_envs.identification.nozzle_residuals import check_offset, output_error_colour
 from ssme_envs.identification.nozzle_uncertainty import (
     DEFAULT_REPLICATES,
     BootstrapUncertainty,
     check_noise_model,
+    count_at_least,
     dsr_e_uncertainty,
 )
 from ssme_envs.identification.subspace import InnovationsModel, SubspaceResult, dsr_e, second_order_parameters
@@ -63,9 +64,7 @@ from ssme_envs.models.nozzle import (
 )
 from ssme_envs.models.uncertainty import ParameterUncertainty
 
-# The output error's long-run variance over its variance above which a note calls it coloured:
-# AR(1) noise of coefficient 0.6, under which white resampling halves the standard error of a mean.
-COLOURED_LONG_RUN_RATIO = 4.0
+MAX_SEED = 2**32 - 1
 # Simulated acquisitions whose mean is the acquisition chain's bias on J, b, k.
 BIAS_DRAWS = 8
 BOUC_WEN_METHOD = (
@@ -80,52 +79,6 @@ class NozzleIdentification:
     subspace: SubspaceResult
     bouc_wen: BoucWenFit
     linear_uncertainty: BootstrapUncertainty | None = None
-
-
-def output_error_colour(residual: np.ndarray) -> dict[str, float | int] | None:
-    """How coloured the linear model's output error (rad, (T,)) is: its lag-1 autocorrelation,
-    the order of its AR sieve and the sieve's long-run variance over its variance (1 for white
-    noise; :class:`~ssme_envs.identification.noise_sieve.ARSieve`). None where the error is not
-    finite (an unstable model's simulation)."""
-    if not np.all(np.isfinite(residual)):
-        return None
-    if not np.ptp(residual) > 0:  # an exact fit: nothing to colour
-        return {"lag1_autocorrelation": 0.0, "sieve_order": 0, "long_run_ratio": 1.0}
-    sieve = fit_sieve(residual)
-    return {
-        "lag1_autocorrelation": sieve.lag1,
-        "sieve_order": sieve.order,
-        "long_run_ratio": sieve.long_run_ratio,
-    }
-
-
-def colour_figures(colour: dict) -> str:
-    """:func:`output_error_colour`'s figures as the CLI and the report give them."""
-    return (
-        f"lag-1 autocorrelation {colour['lag1_autocorrelation']:.2f}, long-run variance "
-        f"{colour['long_run_ratio']:.3g} times its variance (1 for white noise), "
-        f"AR({colour['sieve_order']}) sieve"
-    )
-
-
-def unsieved_colour(dsr_e_fit: dict) -> bool:
-    """Whether a model's ``fit["dsr_e"]`` has a coloured output error (long-run ratio above
-    ``COLOURED_LONG_RUN_RATIO``) that its bootstrap did not resample with its colour."""
-    colour = dsr_e_fit.get("output_error")
-    noise = dsr_e_fit.get("bootstrap", {}).get("noise", "sieve")
-    return colour is not None and noise != "sieve" and colour["long_run_ratio"] > COLOURED_LONG_RUN_RATIO
-
-
-def coloured_error_note(dsr_e_fit: dict) -> str | None:
-    """A note where :func:`unsieved_colour` (``dsr_e_fit``: a model's ``fit["dsr_e"]``); else None."""
-    if not unsieved_colour(dsr_e_fit):
-        return None
-    return (
-        f"note: the linear model's output error is coloured ({colour_figures(dsr_e_fit['output_error'])}); "
-        f"J, b, k's standard errors, bootstrapped with {dsr_e_fit['bootstrap']['noise']} noise, are too "
-        "narrow if the sensor noise is coloured: --bootstrap-noise sieve keeps the colour (and counts "
-        "structure the linear model lacks, such as a hysteresis, as noise too)"
-    )
 
 
 def _finite_or_none(values: dict[str, float]) -> dict[str, float | None]:
@@ -161,11 +114,17 @@ def identify_nozzle(
     """
     check_torque_record(record.tau, record.beta, names=(record.input_name, record.output_name))
     check_noise_model(bootstrap_noise, "bootstrap_noise")
+    count_at_least(workers, "workers", 1)
+    count_at_least(replicates, "replicates", 0)
+    if count_at_least(seed, "seed", 0) > MAX_SEED:  # the Bouc-Wen search's generator takes no more
+        raise ValueError(f"seed must be at most 2**32 - 1, got {seed}")
     say = progress or (lambda line: None)
     start = time.perf_counter()
     subspace = dsr_e(record.tau, record.beta, record.dt, order=2)
     once = time.perf_counter() - start
     linear = subspace.model
+    sim_linear = linear.simulate(record.tau[:, None])[:, 0]
+    check_offset(record.beta - sim_linear, record.output_name)
     tf = second_order_parameters(linear)
     bias = None
     if bench_noise is not None:
@@ -198,7 +157,6 @@ def identify_nozzle(
     if bench_noise is not None and bw.determined:
         bw_bias = bouc_wen_acquisition_bias(record.tau, bw, seed, workers)
         bw = remove_bias(bw, bw_bias)
-    sim_linear = linear.simulate(record.tau[:, None])[:, 0]
     colour = output_error_colour(record.beta - sim_linear)
     fit = {
         "samples": int(record.tau.size),
@@ -209,7 +167,8 @@ def identify_nozzle(
             "singular_values": [float(v) for v in subspace.singular_values],
             "transfer_function": {"numerator": tf["numerator"], "denominator": tf["denominator"]},
             "natural_frequency_hz": tf["natural_frequency_hz"],
-            "resonance_frequency_hz": tf["resonance_frequency_hz"],
+            # none for a joint damped past 1 / sqrt(2): its magnitude has no peak (JSON has no NaN)
+            "resonance_frequency_hz": _finite_or_none({"f": tf["resonance_frequency_hz"]})["f"],
             "damping_ratio": tf["damping_ratio"],
             "fit_percent": float(fit_percent(record.beta, sim_linear)),
             **({} if colour is None else {"output_error": colour}),

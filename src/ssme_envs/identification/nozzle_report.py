@@ -12,11 +12,10 @@ from ssme_envs.identification.metrics import fit_percent
 from ssme_envs.identification.nozzle_pipeline import (
     NozzleIdentification,
     NozzleRecord,
-    colour_figures,
     simulate_joint,
     simulate_linear_model,
-    unsieved_colour,
 )
+from ssme_envs.identification.nozzle_residuals import colour_figures, resampling_shortfall
 from ssme_envs.identification.report_figures import agg_pyplot
 from ssme_envs.identification.subspace import to_continuous
 from ssme_envs.models.nozzle import NozzleCore, NozzleParameters, published_nozzle
@@ -132,6 +131,12 @@ def plot_prediction(
     return {label: float(fit_percent(record.beta, pred)) for label, pred in preds.items()}
 
 
+def _percent(fit: float) -> str:
+    """A fit in %, two decimals; a fit far below zero (a record the model does not describe at
+    all) in three significant digits instead of a hundred."""
+    return f"{fit:.2f}" if abs(fit) < 1e4 else f"{fit:.3g}"
+
+
 def parameter_row(name: str, p: NozzleParameters | None) -> str:
     """One markdown table row: J, b, k, a, A, beta, gamma, n ("-" for a linear joint)."""
     if p is None:
@@ -193,10 +198,11 @@ def _colour_sentence(dsr_e_fit: dict) -> str:
     text = f" The linear model's output error: {colour_figures(colour)}."
     if "acquisition_bias" in dsr_e_fit:  # the embedded bench, whose sensor noise is white
         text += " The bench's sensor noise is white: the colour is what the linear model leaves out."
-    elif unsieved_colour(dsr_e_fit):
+    elif (shortfall := resampling_shortfall(dsr_e_fit)) is not None:
         text += (
-            f" Bootstrapped with {dsr_e_fit['bootstrap']['noise']} noise, the standard errors are too "
-            "narrow if the sensor noise is coloured (`--bootstrap-noise sieve` keeps the colour)."
+            f" It is {shortfall}: bootstrapped with {dsr_e_fit['bootstrap']['noise']} noise, the standard "
+            "errors are too narrow if it is sensor noise (`--bootstrap-noise sieve` resamples it with "
+            "its colour)."
         )
     return text
 
@@ -206,8 +212,8 @@ def _bouc_wen_section(bw: BoucWenFit, bias: dict[str, float] | None = None) -> l
     ``bias``: the acquisition chain's, removed from them (the model's ``fit``), when the record
     came from the embedded bench."""
     fits = (
-        f"Simulation fit {bw.fit_percent:.2f} % (a linear joint fitted the same way: "
-        f"{bw.linear_fit_percent:.2f} %)."
+        f"Simulation fit {_percent(bw.fit_percent)} % (a linear joint fitted the same way: "
+        f"{_percent(bw.linear_fit_percent)} %)."
     )
     if not bw.determined:
         return [f"Bouc-Wen fit: {fits} No Bouc-Wen parameters are reported: {bw.reason}.", ""]
@@ -268,7 +274,12 @@ def write_nozzle_report(
         f"the paper's eq 5: {PAPER_TF[0][0]:g} / (s^2 + {PAPER_TF[1][1]:g} s + {PAPER_TF[1][2]:g}).",
         "",
         f"Natural frequency {dsr['natural_frequency_hz']:.2f} Hz, damping ratio {dsr['damping_ratio']:.4f}, "
-        f"resonance {dsr['resonance_frequency_hz']:.2f} Hz (paper: 11.88 Hz resonance, damping 0.0971).",
+        + (
+            "no resonance peak (damping ratio at least 1/sqrt(2))"
+            if dsr["resonance_frequency_hz"] is None
+            else f"resonance {dsr['resonance_frequency_hz']:.2f} Hz"
+        )
+        + " (paper: 11.88 Hz resonance, damping 0.0971).",
         "",
         "## Parameters",
         "",
@@ -303,7 +314,7 @@ def write_nozzle_report(
         fits = plot_prediction(
             out_dir / f"prediction_{name}.png", record, predictions[name], f"{name} record"
         )
-        lines.append(f"| {name} | " + " | ".join(f"{v:.2f}" for v in fits.values()) + " |")
+        lines.append(f"| {name} | " + " | ".join(_percent(v) for v in fits.values()) + " |")
     lines.append("")
     lines += [f"![prediction, {name} (figure 12)](prediction_{name}.png)" for name in records]
     path = out_dir / "report.md"

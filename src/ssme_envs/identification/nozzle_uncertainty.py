@@ -59,7 +59,9 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.signal
 
+from ssme_envs.identification.arguments import real_record
 from ssme_envs.identification.channel_scales import equilibrated
+from ssme_envs.identification.metrics import fit_percent
 from ssme_envs.identification.noise_sieve import ARSieve, fit_sieve
 from ssme_envs.identification.subspace import SubspaceResult, dsr_e, second_order_parameters
 from ssme_envs.identification.subspace_checks import arx_innovations
@@ -179,14 +181,17 @@ def check_noise_model(noise: object, name: str) -> str:
     return noise
 
 
-def _count(value: int, name: str, least: int) -> int:
+def count_at_least(value: int, name: str, least: int) -> int:
+    """``value`` as an int if it is an integer (not a bool) of at least ``least``, else a
+    ValueError naming ``name``."""
     if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < least:
         raise ValueError(f"{name} must be an integer >= {least}, got {value!r}")
     return int(value)
 
 
 def _siso(x: np.ndarray, name: str) -> np.ndarray:
-    x = np.asarray(x, dtype=float)
+    """One real channel (not complex, bool or masked: :func:`real_record`) as floats (T,)."""
+    x = np.asarray(real_record(x, name, "channels"), dtype=float)
     if x.ndim == 2 and x.shape[1] == 1:
         x = x[:, 0]
     if x.ndim != 1:
@@ -249,17 +254,25 @@ def dsr_e_uncertainty(
     Raises
     ------
     ValueError
-        Bad arguments, a record that does not match ``result``, a model that is not a SISO
+        Bad arguments, a record that does not match ``result`` (its sample time, or a model
+        that simulates it worse than its mean; TypeError for a ``result`` that is not a
+        :class:`SubspaceResult`), a constant ``y``, a model that is not a SISO
         second-order oscillator, or more than 10 % of the replicates failing to identify.
     """
     start = time.perf_counter()
     u, y = _siso(u, "u"), _siso(y, "y")
     dt = check_dt(dt)
-    replicates = _count(replicates, "replicates", MIN_REPLICATES)
-    workers = _count(workers, "workers", 1)
+    replicates = count_at_least(replicates, "replicates", MIN_REPLICATES)
+    workers = count_at_least(workers, "workers", 1)
+    seed = count_at_least(seed, "seed", 0)
     check_noise_model(noise, "noise")
     if u.size != y.size:
         raise ValueError(f"u has {u.size} samples but y has {y.size}")
+    if not isinstance(result, SubspaceResult):
+        got = type(result).__name__
+        raise TypeError(f"result must be the SubspaceResult of dsr_e on the record, got {got}")
+    if not np.ptp(y) > 0:
+        raise ValueError("y is constant: there is no response to bootstrap")
     model = result.model
     if abs(model.dt - dt) > 1e-9 * dt:
         raise ValueError(f"the model's sample time {model.dt:g} s differs from dt = {dt:g} s")
@@ -279,6 +292,12 @@ def dsr_e_uncertainty(
         num, den = scipy.signal.ss2tf(model.A, model.K, model.C, np.ones((1, 1)))
         noise_filter = (np.ravel(num), np.ravel(den))
     clean = model.simulate(u)[:, 0]
+    fit = float(fit_percent(y, clean))
+    if not fit > 0:  # the model explains less of y than y's mean: not the record it came from
+        raise ValueError(
+            f"the model simulates this record worse than its mean does (fit {fit:.3g} %): pass the "
+            "record result was identified from"
+        )
     sieve = None
     if noise == "sieve":  # the output error's colour, kept: the model's own residual, not the ARX's
         sieve = fit_sieve(y - clean)

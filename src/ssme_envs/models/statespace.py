@@ -229,6 +229,9 @@ class AlphaCanonicalModel(Dimensions):
                 f"{len(self.input_names)} input names and {len(self.output_names)} output names "
                 f"for a model with {m} inputs and {p} outputs"
             )
+        for kind, names in (("input", self.input_names), ("output", self.output_names)):
+            if len(set(names)) != len(names):  # a record's columns are read by these names
+                raise ValueError(f"the {kind} names {list(names)} name a channel twice")
 
     @property
     def structure(self) -> AlphaStructure:
