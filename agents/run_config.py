@@ -35,6 +35,7 @@ CONFIG_KEYS = {
     "residual": str,  # a classical controller of the env the policy's action is added to (agents.residual)
     "residual_scale": float,  # the residual's action scale, in (0, 2]
     "residual_penalty": float,  # training reward minus this x |the correction|^2 (agents.residual)
+    "action_noise_std": float,  # SAC's and TD3's Gaussian exploration noise on the actions, in [0, 1]
 }
 # Environment steps of one run at most: 1e12 is months at the adapter's speed (about 40,000 a second).
 MAX_STEPS = 10**12
@@ -97,6 +98,13 @@ def check_config(config: dict[str, Any], source: str = "config") -> dict[str, An
         ):
             raise ValueError(f"{source}: policy.net_arch must be a list of 1 to {MAX_LAYERS} layer sizes, "
                              f"each 1 to {MAX_UNITS} units, got {value!r}")  # fmt: skip
+    if "action_noise_std" in full:
+        noise = full["action_noise_std"]
+        if full["algo"] not in ("sac", "td3"):
+            algo = full["algo"]
+            raise ValueError(f"{source}: action_noise_std is SAC's and TD3's exploration, not {algo}'s")
+        if not (math.isfinite(noise) and 0 <= noise <= 1):
+            raise ValueError(f"{source}: action_noise_std must be a number in [0, 1], got {noise!r}")
     if "residual" in full:
         scale = full.get("residual_scale", RESIDUAL_SCALE)
         checked = check_residual(full["residual"], scale, full["env"], f"{source}: residual")

@@ -116,10 +116,17 @@ def train(config: dict[str, Any], out: Path, progress: bool = True, source: str 
         raise ValueError(f"{source}: {exc}") from None
     out.mkdir(parents=True, exist_ok=True)  # once the envs are made: a refused config leaves nothing
     policy_kwargs = dict(config["policy"]) or None
+    noise = {}
+    if config.get("action_noise_std"):  # (TD3 explores by nothing else; SB3 adds none by default)
+        from stable_baselines3.common.noise import NormalActionNoise
+
+        width = venv.action_space.shape[0]
+        sigma = config["action_noise_std"] * np.ones(width)
+        noise = {"action_noise": NormalActionNoise(np.zeros(width), sigma)}
     try:
         model = _algorithm(algo)(
             "MlpPolicy", venv, seed=seed, device="cpu", verbose=0, policy_kwargs=policy_kwargs,
-            tensorboard_log=str(out / "tensorboard") if config["tensorboard"] else None, **hyper,
+            tensorboard_log=str(out / "tensorboard") if config["tensorboard"] else None, **hyper, **noise,
         )  # fmt: skip
     except (AssertionError, ValueError) as exc:  # SB3 checks hyperparameter values with asserts
         raise ValueError(f"{source}: hyperparameters: {exc}") from None
@@ -139,6 +146,7 @@ def train(config: dict[str, Any], out: Path, progress: bool = True, source: str 
         entry: dict[str, Any] = {"steps": int(model.num_timesteps), "return": float(mean)}
         history.append(entry)
         model.logger.record("eval/mean_reward", float(mean))
+        model.logger.dump(model.num_timesteps)  # at its own step, as SB3's EvalCallback writes it
         if mean > best["return"] or "steps" not in best:  # keep it, with the statistics it saw
             entry["best"] = True
             best.update(steps=entry["steps"], **{"return": entry["return"]})

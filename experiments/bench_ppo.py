@@ -19,7 +19,7 @@ from pathlib import Path
 import torch
 from stable_baselines3 import PPO
 from stable_baselines3.common.env_util import make_vec_env
-from stable_baselines3.common.vec_env import VecNormalize
+from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
 from agents.sb3 import check_config, load_config
 from ssme_envs.envs.sb3_adapter import make_sb3_vec_env
@@ -33,7 +33,7 @@ ENVS = ("ssme_envs/EngineTracking-v0", "ssme_envs/EngineThrottle-v0", "ssme_envs
 def _steps_per_s(env_id: str, steps: int, config: dict) -> float:
     n = config["num_envs"]
     if env_id.startswith("ssme_envs/"):
-        venv = make_sb3_vec_env(env_id, n, seed=0)
+        venv = VecMonitor(make_sb3_vec_env(env_id, n, seed=0))  # as make_vec_env's Monitors
     else:
         venv = make_vec_env(env_id, n_envs=n, seed=0)
     policy_kwargs = {"net_arch": config["policy"]["net_arch"]}

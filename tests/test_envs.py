@@ -291,3 +291,11 @@ def test_bench_command_prints_ratios(capsys):
     # one single and one vector row for each of the zero and the random actions
     assert "Pendulum-v1" in out and "CartPole-v1 vector" in out and out.count("x |") == 4
     assert main(["bench", "--sizes", "0"]) == 2
+
+
+@pytest.mark.parametrize("env_id", ["ssme_envs/NozzleTVC-v0", "ssme_envs/LauncherPitch-v0"])
+def test_render_fps_plays_an_episode_in_real_time(env_id):
+    """A frame per step: RecordVideo's clip of a 0.008 s-step episode lasted five times the
+    episode at the class's 25 fps."""
+    env = gym.make(env_id)
+    assert env.metadata["render_fps"] == round(1 / env.unwrapped.task.dt)

@@ -30,6 +30,12 @@ RUN_FILES = ["config.toml", "normalization.json", "policy.json", "policy.safeten
         ({"env": TRACKING, "algo": "ppo", "policy": {"net_arch": [64, -1]}}, "net_arch"),
         ({"env": TRACKING, "algo": "ppo", "policy": {"activation": "relu"}}, "policy.activation"),
         ({"algo": "ppo"}, "needs 'env' and 'algo'"),
+        ({"env": TRACKING, "algo": "ppo", "action_noise_std": 0.1}, "SAC's and TD3's exploration, not ppo's"),
+        (
+            {"env": TRACKING, "algo": "td3", "action_noise_std": -0.1},
+            r"action_noise_std must be a number in \[0, 1\]",
+        ),
+        ({"env": TRACKING, "algo": "td3", "action_noise_std": float("nan")}, "action_noise_std must be"),
     ],
 )
 def test_bad_configs_name_the_key(config, message):
@@ -146,7 +152,16 @@ def test_train_shorter_than_the_evaluation_interval_keeps_the_final_policy_and_e
     assert summary["steps"] == 320 and summary["kept"] == {"model": "final", "steps": 320}
     assert load_config(out / "config.toml")["hyperparameters"] == {"n_steps": 80}
     assert sorted(p.name for p in out.iterdir() if p.name != MARKER) == sorted([*RUN_FILES, "tensorboard"])
-    assert any(p.name.startswith("events.out.tfevents") for p in (out / "tensorboard").rglob("*"))
+    events = [p for p in (out / "tensorboard").rglob("*") if p.name.startswith("events.out.tfevents")]
+    assert events
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    logged = EventAccumulator(str(events[0]))
+    logged.Reload()
+    # each evaluation at its own step, the final one too (it was recorded but never written)
+    written = [(e.step, e.value) for e in logged.Scalars("eval/mean_reward")]
+    evaluations = [(e["steps"], pytest.approx(e["return"], rel=1e-6)) for e in summary["evaluations"]]
+    assert written == evaluations
     report = tmp_path / "eval"
     args = ["evaluate", "--env", NOZZLE, "--controllers", f"lqi,ppo:{out}", "--scenario", "step",
             "--episodes", "2", "--out", str(report)]  # fmt: skip
@@ -267,3 +282,21 @@ def test_train_out_is_staged_like_every_command(tmp_path, capsys, monkeypatch):
     assert sorted(p.name for p in earlier.iterdir()) == [MARKER, "policy.json"]
     assert (earlier / "policy.json").read_text() == "earlier"
     assert not [p.name for p in tmp_path.iterdir() if ".new-" in p.name]  # the failed run's directory
+
+
+def test_td3_explores_with_the_configured_action_noise(tmp_path):
+    """``action_noise_std``: TD3 adds Gaussian noise of that std to its actions while it collects
+    (SB3 adds none by default, so TD3 explored by nothing); the run records it and is repeatable."""
+    base = (f'env = "{NOZZLE}"\nalgo = "td3"\nnum_envs = 4\neval_episodes = 2\naction_noise_std = 0.3\n'
+            "[env_options]\nepisode_seconds = 0.4\n[policy]\nnet_arch = [8, 8]\n"
+            "[hyperparameters]\nlearning_starts = 100\nbuffer_size = 1000\n")  # fmt: skip
+    config = tmp_path / "td3.toml"
+    config.write_text(base)
+    runs = []
+    for name in ("a", "b", "quiet"):
+        if name == "quiet":
+            config.write_text(base.replace("action_noise_std = 0.3", "action_noise_std = 0.0"))
+        assert main(["train", "--config", str(config), "--steps", "200", "--out", str(tmp_path / name)]) == 0
+        runs.append((tmp_path / name / "policy.safetensors").read_bytes())
+    assert load_config(tmp_path / "a" / "config.toml")["action_noise_std"] == 0.3
+    assert runs[0] == runs[1] and runs[0] != runs[2]  # the noise changed what was learned, repeatably

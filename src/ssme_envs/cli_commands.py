@@ -84,9 +84,9 @@ def evaluate_command(args: argparse.Namespace) -> int:
     command = "ssme-envs " + " ".join(sys.argv[1:]) if sys.argv[1:2] == ["evaluate"] else "ssme-envs evaluate"
     robust = {}
     if args.monte_carlo is not None:
+        check_count("--monte-carlo", args.monte_carlo)  # a bad N is named first, whatever else is given
         if args.episodes is not None:
             raise ValueError("give --episodes or --monte-carlo N (N plants, one per episode), not both")
-        check_count("--monte-carlo", args.monte_carlo)
         robust = {
             "monte_carlo": args.monte_carlo,
             "plant_spread": DEFAULT_SPREAD if args.plant_spread is None else args.plant_spread,

@@ -86,6 +86,15 @@ class EpisodeDraws:
         else:
             self._use_table(np.zeros((n, size), dtype=np.float32))
 
+    def __getstate__(self) -> dict:
+        """The state without the generators' capsules, which do not pickle (a vector env then
+        pickles and deep-copies, as SB3's SubprocVecEnv and ``copy.deepcopy`` need)."""
+        return {key: value for key, value in self.__dict__.items() if key != "_capsules"}
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self._capsules = [rng.bit_generator.capsule for rng in self.generators]
+
     @property
     def form(self) -> str:
         """``"origins"`` or ``"table"`` (see the module docs)."""

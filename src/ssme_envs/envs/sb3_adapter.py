@@ -12,11 +12,18 @@ act on the indexed sub-envs only, through the vector env's per-sub-env views
 (:class:`~ssme_envs.envs.vector.SubEnv`: what cannot be done to one sub-env alone raises
 AttributeError rather than acting on all), or on the sub-env objects of a ``SyncVectorEnv``.
 
-Usage::
+No Monitor is added (SB3's ``make_vec_env`` adds one per env): wrap the result in ``VecMonitor``
+for episode statistics (``ep_info_buffer``, ``rollout/ep_rew_mean``), outermost of any reward
+shaping, as ``ssme-envs train`` does. The observations are the vector env's own arrays (the
+engines' column-major): the same values as ``DummyVecEnv``'s, but torch's products over a
+column-major batch can differ from a row-major one's in the last bits, so training through this
+adapter and through a ``SyncVectorEnv`` agree to round-off, not bit for bit (each is
+reproducible; the shipped policies were trained through this adapter). Usage::
 
+    from stable_baselines3.common.vec_env import VecMonitor
     from ssme_envs.envs.sb3_adapter import make_sb3_vec_env
-    venv = make_sb3_vec_env("ssme_envs/EngineTracking-v0", num_envs=64, seed=0)
-    model = stable_baselines3.PPO("MlpPolicy", venv)
+    venv = VecMonitor(make_sb3_vec_env("ssme_envs/EngineTracking-v0", num_envs=64, seed=0))
+    model = stable_baselines3.PPO("MlpPolicy", venv, n_steps=64)
 """
 
 from __future__ import annotations
@@ -186,7 +193,8 @@ def _sub_info(info: dict[str, Any], i: int) -> dict[str, Any]:
 
 
 def make_sb3_vec_env(env_id: str, num_envs: int, seed: int | None = None, **options: Any) -> SB3VecEnv:
-    """A registered env's native vector env (SAME_STEP autoreset) wrapped for stable-baselines3."""
+    """A registered env's native vector env (SAME_STEP autoreset) wrapped for stable-baselines3
+    (no Monitor: see the module docs)."""
     venv = gym.make_vec(
         env_id,
         num_envs=num_envs,

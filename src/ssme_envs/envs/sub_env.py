@@ -77,6 +77,10 @@ class SubEnv:
     def __repr__(self) -> str:
         return f"SubEnv({type(self._venv).__name__}, index={self._index})"
 
+    def __reduce__(self) -> tuple:
+        """Pickled and copied as the view it is (its slots are set in ``__init__`` only)."""
+        return type(self), (self._venv, self._index)
+
     def __getattr__(self, name: str) -> Any:
         raise AttributeError(
             f"{name!r} does not exist per sub-env of the native {type(self._venv).__name__} (a sub-env "

@@ -84,6 +84,8 @@ class TrackingEnv(gym.Env):
                 f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}"
             )
         self.render_mode = render_mode
+        # a frame per step plays the episode in real time (RecordVideo reads this)
+        self.metadata = {**self.metadata, "render_fps": max(1, round(1.0 / self.task.dt))}
         self.action_space = gym.spaces.Box(-1.0, 1.0, (self.task.n_actions,), dtype=np.float32)
         self.observation_space = self.task.observation.space()
         self._low, self._high = self.observation_space.low, self.observation_space.high
