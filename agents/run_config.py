@@ -12,6 +12,7 @@ from typing import Any
 from agents.hyperparameters import check_hyperparameters
 from agents.policy_files import algorithm_class as _algorithm
 from agents.residual import check_residual
+from ssme_envs.identification.arguments import MAX_SEED
 from ssme_envs.input_files import FileTooLarge, NotRegularFile, read_bounded
 
 try:
@@ -42,7 +43,6 @@ MAX_STEPS = 10**12
 DEFAULTS = {"steps": 200_000, "seed": 0, "num_envs": 64, "eval_freq": 50_000, "eval_episodes": 20,
             "tensorboard": False, "env_options": {}, "hyperparameters": {}, "policy": {}}  # fmt: skip
 RESIDUAL_SCALE = 0.5  # the residual's default action scale
-MAX_SEED = 2**32 - 1
 MAX_CONFIG_BYTES = 1 << 20  # a run config is a page of TOML; this stops /dev/zero and its like
 # policy.net_arch bounds: far beyond what these envs need (64 x 64 does), and a layer of MAX_UNITS
 # squared float32 weights (64 MiB, times the optimizer's copies) still fits any machine that trains

@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 
 from ssme_envs.identification import dsr_e, second_order_parameters
 from ssme_envs.identification.noise_sieve import fit_sieve, max_sieve_order
-from ssme_envs.identification.nozzle_residuals import coloured_error_note, output_error_colour
+from ssme_envs.identification.nozzle_residuals import output_error_colour, output_error_notes
 from ssme_envs.identification.nozzle_uncertainty import dsr_e_uncertainty
 from ssme_envs.models.nozzle import published_nozzle
 
@@ -34,6 +34,12 @@ def _long_run_ratio(a: np.ndarray) -> float:
     impulse[0] = 1.0
     h = scipy.signal.lfilter([1.0], a, impulse)
     return float(h.sum() ** 2 / np.sum(h * h))
+
+
+def coloured_error_note(dsr_e_fit: dict) -> str | None:
+    """The CLI's note on the bootstrap's shortfall, if it gives one."""
+    notes = [note for note in output_error_notes(dsr_e_fit) if "standard errors" in note]
+    return notes[0] if notes else None
 
 
 def _autocorrelation(x: np.ndarray, lag: int) -> float:
@@ -89,7 +95,8 @@ def test_the_note_names_coloured_noise_where_the_bootstrap_did_not_keep_its_colo
     boot = {"noise": "sieve", "noise_std": innovations}
     assert coloured_error_note({"output_error": colour, "bootstrap": boot}) is None
     exact = output_error_colour(np.zeros(100))
-    assert exact == {"std": 0.0, "lag1_autocorrelation": 0.0, "sieve_order": 0, "long_run_ratio": 1.0}
+    flat = {"lag1_autocorrelation": 0.0, "sieve_order": 0, "long_run_ratio": 1.0}
+    assert exact == {"mean": 0.0, "std": 0.0, **flat}
     noiseless = {"noise": "white", "noise_std": 0.0}
     assert coloured_error_note({"output_error": exact, "bootstrap": noiseless}) is None
     assert output_error_colour(np.r_[np.zeros(50), np.nan]) is None  # an unstable model's simulation

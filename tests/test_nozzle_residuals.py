@@ -16,15 +16,15 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from ssme_envs.cli import main
-from ssme_envs.identification.nozzle_residuals import check_offset
+from ssme_envs.identification.nozzle_residuals import offset_shortfall, output_error_colour
 
 DT, J, K = 0.008, 25.18, 1.43e5
 ONE_WORKER = ("--workers", "1")
 
 
-def _record(path, zeta=0.1, samples=1000, extra=None, seed=0):
-    """A CSV record of the joint with damping ratio ``zeta``, white sensor noise at 2 % of the
-    angle's spread, and ``extra`` (rad, (samples,)) added to the angle."""
+def _joint(zeta=0.1, samples=1000, extra=None, seed=0):
+    """Torque and angle of the joint with damping ratio ``zeta``, white sensor noise at 2 % of the
+    angle's spread, and ``extra`` (rad, (samples,)) added to the angle; and its b."""
     b = 2 * zeta * np.sqrt(K * J)
     a_c = np.array([[0.0, 1.0], [-K / J, -b / J]])
     system = scipy.signal.cont2discrete((a_c, np.array([[0.0], [1 / J]]), np.eye(1, 2), np.zeros((1, 1))), DT)
@@ -34,6 +34,12 @@ def _record(path, zeta=0.1, samples=1000, extra=None, seed=0):
     clean = scipy.signal.dlsim(system, tau[:, None])[1][:, 0]
     beta = clean + 0.02 * clean.std() * rng.standard_normal(samples)
     beta += 0.0 if extra is None else extra
+    return tau, beta, b
+
+
+def _record(path, zeta=0.1, samples=1000, extra=None, seed=0):
+    """:func:`_joint`'s record as a CSV file; (path, b)."""
+    tau, beta, b = _joint(zeta, samples, extra, seed)
     table = np.column_stack([np.arange(samples) * DT, tau, beta])
     np.savetxt(path, table, delimiter=",", header="t,tau,beta", comments="", fmt="%.17g")
     return path, b
@@ -51,18 +57,18 @@ def test_a_joint_damped_past_the_resonance_is_identified_without_one(tmp_path, c
     assert "no resonance peak" in (tmp_path / "out" / "report.md").read_text()
 
 
-def test_an_angle_offset_is_refused_naming_it(tmp_path, capsys):
+def test_an_angle_offset_gets_a_note_naming_it(tmp_path, capsys):
     """The angle measured from 0.01 rad (after its first sample, which the at-rest check reads):
-    J and k came out 5 % off with standard errors 300 times smaller than that."""
+    J and k came out 5 % off with standard errors 300 times smaller than that, and nothing said
+    so. (A note, not a refusal: a record cut mid-motion shows a mean too.)"""
     offset = np.full(1000, 0.01)
     offset[0] = 0.0
     path, _ = _record(tmp_path / "offset.csv", extra=offset)
-    assert main(["identify", "nozzle", "--data", str(path), "--out", str(tmp_path / "out"), *ONE_WORKER]) == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and err[0].startswith("error: the angle 'beta' sits +")
-    assert float(err[0].split("sits ")[1].split(" rad")[0]) == pytest.approx(0.01, rel=0.05)
-    assert "offset" in err[0]
-    assert not (tmp_path / "out").exists()
+    assert main(["identify", "nozzle", "--data", str(path), "--out", str(tmp_path / "out"), *ONE_WORKER]) == 0
+    notes = [line for line in capsys.readouterr().out.splitlines() if "has a mean of" in line]
+    assert len(notes) == 1 and notes[0].startswith("note: the linear model's output error has a mean of +")
+    assert float(notes[0].split("mean of ")[1].split(" rad")[0]) == pytest.approx(0.01, rel=0.05)
+    assert "offset" in notes[0] and "has a mean of" in (tmp_path / "out" / "report.md").read_text()
 
 
 def test_a_hum_in_the_angle_gets_the_note(tmp_path, capsys):
@@ -79,15 +85,24 @@ def test_a_hum_in_the_angle_gets_the_note(tmp_path, capsys):
     assert model["fit"]["dsr_e"]["bootstrap"]["noise"] == "sieve"
 
 
-@settings(max_examples=40, deadline=None)
-@given(a=st.floats(0.0, 0.99), seed=st.integers(0, 2**32 - 1), samples=st.integers(1000, 8000))
-def test_coloured_noise_is_not_taken_for_an_offset(a, seed, samples):
-    """AR(1) noise up to coefficient 0.99 wanders, but its mean stays well inside two spreads;
-    the same noise 3 spreads off zero is refused."""
-    v = scipy.signal.lfilter([1.0], [1.0, -a], np.random.default_rng(seed).standard_normal(samples))
-    check_offset(v - v.mean() + 0.3 * v.std(), "beta")
-    with pytest.raises(ValueError, match="measured from an offset"):
-        check_offset(v - v.mean() + 3 * v.std(), "beta")
+@settings(max_examples=15, deadline=None)
+@given(a=st.floats(0.0, 0.95), seed=st.integers(0, 2**32 - 1))
+def test_coloured_noise_is_not_taken_for_an_offset(a, seed):
+    """The output error of DSR_e's model on a 4000-sample record with AR(1) sensor noise up to
+    0.95 (as it comes, not centred): its mean stays inside its spread, and no note; the same
+    record measured from an offset of three noise spreads gets one."""
+    from ssme_envs.identification import dsr_e
+
+    rng = np.random.default_rng(seed)
+    noise = scipy.signal.lfilter([1.0], [1.0, -a], rng.standard_normal(4000))
+    noise *= 5e-4 / noise.std()
+    for shift, noted in ((0.0, False), (1.5e-3, True)):
+        extra = noise + shift
+        extra[0] = 0.0  # at rest at zero at the first sample, as the CLI asks
+        tau, beta, _ = _joint(samples=4000, extra=extra, seed=seed % 1000)
+        model = dsr_e(tau, beta, DT, order=2).model
+        error = output_error_colour(beta - model.simulate(tau[:, None])[:, 0])
+        assert (offset_shortfall({"output_error": error}) is not None) == noted, (shift, error["mean"])
 
 
 def _arrays(tmp_path):

@@ -15,10 +15,16 @@ from ssme_envs.envs import catalogue
 from ssme_envs.envs.sb3_adapter import make_sb3_vec_env
 
 
+@pytest.mark.parametrize("table", [False, True])
 @pytest.mark.parametrize("env_id", list(catalogue.ENVS))
-def test_a_vector_env_pickles_and_copies_mid_episode(env_id):
+def test_a_vector_env_pickles_and_copies_mid_episode(env_id, table):
+    """``table``: sub-env 0 given another bit generator, so the draws are held as a table (the
+    form without the compiled kernel too), whose row views a copy must rebuild."""
     env = gym.make_vec(env_id, num_envs=6, vectorization_mode="vector_entry_point")
     env.reset(seed=3)
+    if table:
+        env.unwrapped.sub_env(0).np_random = np.random.Generator(np.random.MT19937(5))
+        assert env.unwrapped._draws.form == "table"
     rng = np.random.default_rng(0)
     actions = rng.uniform(-1, 1, (60, *env.action_space.shape)).astype(np.float32)
     for a in actions[:5]:

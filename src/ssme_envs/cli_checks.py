@@ -74,9 +74,12 @@ def check_count(option: str, value: int) -> None:
 
 
 def check_seed(value: int | None) -> None:
-    """ValueError for a negative seed (numpy's and gymnasium's seeding refuse them)."""
-    if value is not None and value < 0:
-        raise ValueError(f"--seed must be a non-negative integer, got {value}")
+    """ValueError for a seed outside 0..2**32 - 1 (numpy's and gymnasium's seeding refuse negative
+    ones, scipy's searches larger ones): before any work."""
+    from ssme_envs.identification.arguments import MAX_SEED
+
+    if value is not None and not 0 <= value <= MAX_SEED:
+        raise ValueError(f"--seed must be a non-negative integer of at most {MAX_SEED}, got {value}")
 
 
 def _read_int(path: str, key: str | None = None) -> int | None:

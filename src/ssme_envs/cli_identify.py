@@ -152,10 +152,9 @@ def identify_nozzle(args: argparse.Namespace) -> int:
         )
     lin = run.identified.model.linear
     if args.data is not None:  # the bench's sensor noise is white: its colour is the hysteresis
-        from ssme_envs.identification.nozzle_residuals import coloured_error_note
+        from ssme_envs.identification.nozzle_residuals import output_error_notes
 
-        note = coloured_error_note(run.identified.model.fit["dsr_e"])
-        if note is not None:
+        for note in output_error_notes(run.identified.model.fit["dsr_e"]):
             print(note)
     print(f"linear: J {lin['J']:.4g} kg m^2, b {lin['b']:.4g} N m s/rad, k {lin['k']:.4g} N m/rad")
     print(f"Bouc-Wen: {run.identified.bouc_wen.reason}")

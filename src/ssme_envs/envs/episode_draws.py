@@ -87,13 +87,15 @@ class EpisodeDraws:
             self._use_table(np.zeros((n, size), dtype=np.float32))
 
     def __getstate__(self) -> dict:
-        """The state without the generators' capsules, which do not pickle (a vector env then
-        pickles and deep-copies, as SB3's SubprocVecEnv and ``copy.deepcopy`` need)."""
-        return {key: value for key, value in self.__dict__.items() if key != "_capsules"}
+        """The state without what is made from the rest: the generators' capsules (which do not
+        pickle) and the table's row views (which a copy would cut loose from the table), so that a
+        vector env pickles and deep-copies."""
+        return {key: value for key, value in self.__dict__.items() if key not in ("_capsules", "_table_rows")}
 
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state)
         self._capsules = [rng.bit_generator.capsule for rng in self.generators]
+        self._table_rows = [] if self._table is None else list(self._table)
 
     @property
     def form(self) -> str:

@@ -21,6 +21,7 @@ from ssme_envs.models.linear import check_dt, describe, holds_bool, masked_eleme
 
 REAL_KINDS = "fiu"  # numpy dtype kinds of real numbers: bool, complex, strings and objects are not
 METHODS = ("iv", "ls", "oe")  # identify()'s estimators, described there
+MAX_SEED = 2**32 - 1  # numpy's legacy seeding (scipy's searches, SB3's set_random_seed) takes 32 bits
 
 
 class ArgumentTypeError(TypeError, ValueError):

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ssme_envs.identification.arguments import MAX_SEED
 from ssme_envs.identification.bouc_wen import (
     DEFAULT_NORMALIZATION_A,
     NORMALIZED_NAMES,
@@ -44,9 +45,10 @@ from ssme_envs.identification.nozzle_bench import (
     validation_experiment,
     write_nozzle_record,
 )
-from ssme_envs.identification.nozzle_residuals import check_offset, output_error_colour
+from ssme_envs.identification.nozzle_residuals import output_error_colour
 from ssme_envs.identification.nozzle_uncertainty import (
     DEFAULT_REPLICATES,
+    MIN_REPLICATES,
     BootstrapUncertainty,
     check_noise_model,
     count_at_least,
@@ -64,7 +66,6 @@ from ssme_envs.models.nozzle import (
 )
 from ssme_envs.models.uncertainty import ParameterUncertainty
 
-MAX_SEED = 2**32 - 1
 # Simulated acquisitions whose mean is the acquisition chain's bias on J, b, k.
 BIAS_DRAWS = 8
 BOUC_WEN_METHOD = (
@@ -115,7 +116,8 @@ def identify_nozzle(
     check_torque_record(record.tau, record.beta, names=(record.input_name, record.output_name))
     check_noise_model(bootstrap_noise, "bootstrap_noise")
     count_at_least(workers, "workers", 1)
-    count_at_least(replicates, "replicates", 0)
+    if count_at_least(replicates, "replicates", 0) and replicates < MIN_REPLICATES:  # 0: none
+        raise ValueError(f"replicates must be 0 (none) or at least {MIN_REPLICATES}, got {replicates}")
     if count_at_least(seed, "seed", 0) > MAX_SEED:  # the Bouc-Wen search's generator takes no more
         raise ValueError(f"seed must be at most 2**32 - 1, got {seed}")
     say = progress or (lambda line: None)
@@ -124,7 +126,6 @@ def identify_nozzle(
     once = time.perf_counter() - start
     linear = subspace.model
     sim_linear = linear.simulate(record.tau[:, None])[:, 0]
-    check_offset(record.beta - sim_linear, record.output_name)
     tf = second_order_parameters(linear)
     bias = None
     if bench_noise is not None:

@@ -15,7 +15,7 @@ from ssme_envs.identification.nozzle_pipeline import (
     simulate_joint,
     simulate_linear_model,
 )
-from ssme_envs.identification.nozzle_residuals import colour_figures, resampling_shortfall
+from ssme_envs.identification.nozzle_residuals import colour_figures, offset_shortfall, resampling_shortfall
 from ssme_envs.identification.report_figures import agg_pyplot
 from ssme_envs.identification.subspace import to_continuous
 from ssme_envs.models.nozzle import NozzleCore, NozzleParameters, published_nozzle
@@ -203,6 +203,11 @@ def _colour_sentence(dsr_e_fit: dict) -> str:
             f" It is {shortfall}: bootstrapped with {dsr_e_fit['bootstrap']['noise']} noise, the standard "
             "errors are too narrow if it is sensor noise (`--bootstrap-noise sieve` resamples it with "
             "its colour)."
+        )
+    if (offset := offset_shortfall(dsr_e_fit)) is not None:
+        text += (
+            f" It {offset}: an angle measured from an offset, a drift, or a record that does not "
+            "start at rest moves J, b, k."
         )
     return text
 
