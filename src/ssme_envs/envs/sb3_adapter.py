@@ -14,8 +14,8 @@ AttributeError rather than acting on all), or on the sub-env objects of a ``Sync
 
 No Monitor is added (SB3's ``make_vec_env`` adds one per env): wrap the result in ``VecMonitor``
 for episode statistics (``ep_info_buffer``, ``rollout/ep_rew_mean``), outermost of any reward
-shaping, as ``ssme-envs train`` does. The observations are the vector env's own arrays (the
-engines' column-major): the same values as ``DummyVecEnv``'s, but torch's products over a
+shaping, as ``ssme-envs train`` does. The observations are the vector env's own arrays (an
+engine's steps give column-major ones): the same values as ``DummyVecEnv``'s, but torch's products over a
 column-major batch can differ from a row-major one's in the last bits, so training through this
 adapter and through a ``SyncVectorEnv`` agree to round-off, not bit for bit (each is
 reproducible; the shipped policies were trained through this adapter). Usage::
