@@ -4,7 +4,6 @@ value, and the steps SB3 will actually train (whole rollouts)."""
 from __future__ import annotations
 
 import inspect
-import json
 import math
 from pathlib import Path
 from typing import Any
@@ -141,22 +140,12 @@ def load_config(path: Path) -> dict[str, Any]:
 
 def config_toml(config: dict[str, Any]) -> str:
     """The resolved config as TOML (flat values and one level of tables)."""
+    from ssme_envs.outputs import toml_value
 
-    def value(v: Any) -> str:
-        if isinstance(v, bool):
-            return "true" if v else "false"
-        if isinstance(v, str):
-            return json.dumps(v)
-        if isinstance(v, list):
-            return "[" + ", ".join(value(x) for x in v) + "]"
-        if isinstance(v, dict):
-            return "{" + ", ".join(f"{k} = {value(x)}" for k, x in v.items()) + "}"
-        return repr(v)
-
-    lines = [f"{k} = {value(v)}" for k, v in config.items() if not isinstance(v, dict)]
+    lines = [f"{k} = {toml_value(v)}" for k, v in config.items() if not isinstance(v, dict)]
     for key, table in config.items():
         if isinstance(table, dict):
-            lines += ["", f"[{key}]"] + [f"{k} = {value(v)}" for k, v in table.items()]
+            lines += ["", f"[{key}]"] + [f"{k} = {toml_value(v)}" for k, v in table.items()]
     return "\n".join(lines) + "\n"
 
 

@@ -120,6 +120,19 @@ def check_file_target(path: str | Path, option: str = "--out") -> None:
         raise OutputError(f"{option} {path}: cannot write in {target.parent} ({exc.strerror})") from None
 
 
+def toml_value(value: Any) -> str:
+    """A value as TOML writes it inline: a bool, a quoted string, a list, an inline table."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return json.dumps(value)
+    if isinstance(value, list):
+        return "[" + ", ".join(toml_value(v) for v in value) + "]"
+    if isinstance(value, dict):
+        return "{" + ", ".join(f"{k} = {toml_value(v)}" for k, v in value.items()) + "}"
+    return repr(value)
+
+
 def write_text(path: str | Path, text: str) -> None:
     """Write ``text`` (UTF-8) to ``path`` atomically."""
     with atomic_write(path) as fh:
@@ -387,6 +400,7 @@ __all__ = [
     "output_directory",
     "run_directory",
     "save_figure",
+    "toml_value",
     "write_text",
     "write_with",
 ]

@@ -165,15 +165,9 @@ WRITTEN_CAUSES: dict[tuple[str, str, str], Cause] = {
 
 def options_text(options: dict) -> str:
     """Env options as TOML writes them inline: ``plant = "identified", truth = {backlash = 0.0}``."""
+    from ssme_envs.outputs import toml_value
 
-    def value(v: object) -> str:
-        if isinstance(v, dict):
-            return "{" + options_text(v) + "}"
-        if isinstance(v, bool):
-            return str(v).lower()
-        return f'"{v}"' if isinstance(v, str) else repr(v)
-
-    return ", ".join(f"{k} = {value(v)}" for k, v in options.items())
+    return ", ".join(f"{k} = {toml_value(v)}" for k, v in options.items())
 
 
 def training_cause(results: EvaluationResult, scenario: str, controller: str) -> str | None:

@@ -179,10 +179,7 @@ class EngineTask:
         object.__setattr__(self, "offsets", offsets)
         fault_step = -1 if self.fault is None else self.fault.step(self.dt, self.horizon)
         object.__setattr__(self, "fault_step", fault_step)
-        bias = (
-            abs(self.fault.magnitude) if self.fault is not None and self.fault.kind == "sensor_bias" else 0.0
-        )
-        error = 100.0 * (self.envelope + float(self.amplitude.max()) + bias) + 50.0
+        error = 100.0 * (self.envelope + float(self.amplitude.max()) + Fault.sensor_bias(self.fault)) + 50.0
         object.__setattr__(
             self, "step_cost_bound", self.error_weight * 2 * error**2 + self.rate_weight * 2 * 2.0**2
         )

@@ -46,6 +46,12 @@ class Fault:
             )
         return step
 
+    @staticmethod
+    def sensor_bias(fault: Fault | None) -> float:
+        """The size of ``fault``'s sensor bias (0 for no fault or another kind): what the bound on
+        a step's tracking error adds."""
+        return abs(fault.magnitude) if fault is not None and fault.kind == "sensor_bias" else 0.0
+
     @classmethod
     def parse(
         cls,

@@ -188,8 +188,7 @@ class NozzleTask:
         object.__setattr__(self, "rk4_params", rk4_parameters(self.plant.normalized()))
         fault_step = -1 if self.fault is None else self.fault.step(self.dt, self.horizon)
         object.__setattr__(self, "fault_step", fault_step)
-        bias = abs(self.fault.magnitude) if self.fault is not None and self.fault.kind == "sensor_bias" else 0
-        error = DEG * (self.envelope + float(self.amplitude[0]) + bias) + 1.0
+        error = DEG * (self.envelope + float(self.amplitude[0]) + Fault.sensor_bias(self.fault)) + 1.0
         object.__setattr__(self, "step_cost_bound", self.error_weight * error**2 + self.rate_weight * 2.0**2)
         object.__setattr__(self, "score_config", score_config(self, DEG / self.dt, measured=True))
 

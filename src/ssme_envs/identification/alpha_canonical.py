@@ -163,7 +163,7 @@ def check_gains(model: AlphaCanonicalModel, binary: np.ndarray, input_names: Seq
     """Refuse an identified lambda outside (0, 2), where one side's valve gain changes sign (the
     model files refuse it too), saying why it can come out there: for a two-level input
     (``binary``) lambda is read from the outputs' means (eq 42), which an output offset moves."""
-    outside = np.flatnonzero(~((model.lam > 0.0) & (model.lam < 2.0)))
+    outside = model.gains_outside_range()
     if not outside.size:
         return
     j = int(outside[0])
@@ -265,8 +265,9 @@ def identify(
     dt, indices, in_names, out_names = args.dt, args.indices, args.input_names, args.output_names
     u, y = check_record(args.u, args.y, in_names, out_names)
     names = (in_names, out_names)
+    inputs = _names(in_names, u.shape[1], "u")  # the names the checks' messages give
     past = max(1, min(2 * max(indices or (max_index,)), u.shape[0] // (4 * (u.shape[1] + y.shape[1]))))
-    check_input_directions(u, lambda: record_noise(u, y, past), _names(in_names, u.shape[1], "u"))
+    check_input_directions(u, lambda: record_noise(u, y, past), inputs)
 
     search = None
     if indices is None:
@@ -319,7 +320,7 @@ def identify(
     else:
         fit = _fit(AlphaStructure.from_indices(indices), u, y, dt, method, asymmetric, names)
     # before the covariance and the output-error search: a feedthrough makes both meaningless
-    check_feedthrough(fit.model, u, y, _names(in_names, u.shape[1], "u"), _names(out_names, y.shape[1], "y"))
+    check_feedthrough(fit.model, u, y, inputs, _names(out_names, y.shape[1], "y"))
     if search is not None:
         fit.model.fit["structure"] = search.to_dict()
     binary = ~np.isnan(fit.gamma)
@@ -327,10 +328,10 @@ def identify(
         model, intercept, cov = fit_output_error(
             fit.model, fit.intercept, u, y, asymmetric, binary, uncertainty
         )
-        check_gains(model, binary, _names(in_names, u.shape[1], "u"))
+        check_gains(model, binary, inputs)
         model.uncertainty = cov
         return Identification(model, search, intercept, method)
-    check_gains(fit.model, binary, _names(in_names, u.shape[1], "u"))
+    check_gains(fit.model, binary, inputs)
     if uncertainty:
         fit.model.uncertainty = parameter_uncertainty(fit, y, method)
     return Identification(fit.model, search, fit.intercept, method)

@@ -82,9 +82,14 @@ class NozzleIdentification:
     linear_uncertainty: BootstrapUncertainty | None = None
 
 
+def _finite(value: float) -> float | None:
+    """JSON has no NaN or inf: what is not a finite number is written as null."""
+    return float(value) if np.isfinite(value) else None
+
+
 def _finite_or_none(values: dict[str, float]) -> dict[str, float | None]:
-    """JSON has no inf: an undetermined parameter's standard error is written as null."""
-    return {key: (float(v) if np.isfinite(v) else None) for key, v in values.items()}
+    """An undetermined parameter's standard error is written as null (:func:`_finite`)."""
+    return {key: _finite(v) for key, v in values.items()}
 
 
 def identify_nozzle(
@@ -169,7 +174,7 @@ def identify_nozzle(
             "transfer_function": {"numerator": tf["numerator"], "denominator": tf["denominator"]},
             "natural_frequency_hz": tf["natural_frequency_hz"],
             # none for a joint damped past 1 / sqrt(2): its magnitude has no peak (JSON has no NaN)
-            "resonance_frequency_hz": _finite_or_none({"f": tf["resonance_frequency_hz"]})["f"],
+            "resonance_frequency_hz": _finite(tf["resonance_frequency_hz"]),
             "damping_ratio": tf["damping_ratio"],
             "fit_percent": float(fit_percent(record.beta, sim_linear)),
             **({} if colour is None else {"output_error": colour}),

@@ -15,7 +15,12 @@ from ssme_envs.identification.nozzle_pipeline import (
     simulate_joint,
     simulate_linear_model,
 )
-from ssme_envs.identification.nozzle_residuals import colour_figures, offset_shortfall, resampling_shortfall
+from ssme_envs.identification.nozzle_residuals import (
+    OFFSET_CAUSES,
+    colour_figures,
+    offset_shortfall,
+    resampling_shortfall,
+)
 from ssme_envs.identification.report_figures import agg_pyplot
 from ssme_envs.identification.subspace import to_continuous
 from ssme_envs.models.nozzle import NozzleCore, NozzleParameters, published_nozzle
@@ -205,10 +210,7 @@ def _colour_sentence(dsr_e_fit: dict) -> str:
             "its colour)."
         )
     if (offset := offset_shortfall(dsr_e_fit)) is not None:
-        text += (
-            f" It {offset}: an angle measured from an offset, a drift, or a record that does not "
-            "start at rest moves J, b, k."
-        )
+        text += f" It {offset}: {OFFSET_CAUSES}."
     return text
 
 

@@ -26,6 +26,10 @@ LARGER_THAN_RESAMPLED = 3.0
 # A mean this many times the output error's spread: the bench's records sit at 0.003-0.08 and AR(1)
 # 0.95 sensor noise near 0.3; a record cut mid-motion or with a drift reaches 1.4-2.2.
 OFFSET_SPREADS = 1.0
+# what such a mean is, and what it does: said by the CLI's note and the report
+OFFSET_CAUSES = (
+    "an angle measured from an offset, a drift, or a record that does not start at rest moves J, b, k"
+)
 
 
 def output_error_colour(residual: np.ndarray) -> dict[str, float | int] | None:
@@ -110,8 +114,7 @@ def output_error_notes(dsr_e_fit: dict) -> list[str]:
     offset = offset_shortfall(dsr_e_fit)
     if offset is not None:
         notes.append(
-            f"note: the linear model's output error {offset}: an angle measured from an offset, a "
-            "drift, or a record that does not start at rest moves J, b, k (subtract the angle at "
+            f"note: the linear model's output error {offset}: {OFFSET_CAUSES} (subtract the angle at "
             "rest, cut the record where the joint rests)"
         )
     return notes

@@ -159,8 +159,7 @@ def uncapped_alternative(
     if past <= fit.past:  # the record did not cap the first pass below the rule
         return fit
     try:
-        with np.errstate(over="ignore", invalid="ignore"):  # as for the first pass
-            trial = HorizonFit(*one_pass(past, fit.future)[:3], past, fit.future)
+        trial = HorizonFit(*one_pass(past, fit.future)[:3], past, fit.future)  # in dsr_e's errstate
     except ValueError:
         return fit
     if _turns_unstable(trial.model, fit.model) or _scored_worse(score, trial.model, fit.model, past):

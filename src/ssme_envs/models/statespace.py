@@ -303,6 +303,11 @@ class AlphaCanonicalModel(Dimensions):
     def spectral_radius(self) -> float:
         return spectral_radius(self.A)
 
+    def gains_outside_range(self) -> np.ndarray:
+        """Indices of the inputs whose lambda lies outside (0, 2), where the valve gain on one side
+        of the operating point changes sign (``u* = u + (lambda - 1)|u|``)."""
+        return np.flatnonzero(~((self.lam > 0.0) & (self.lam < 2.0)))
+
     def dc_gain(self) -> np.ndarray:
         """Steady-state gain from u* to y, shape (p, m)."""
         n = self.A.shape[0]

@@ -113,7 +113,7 @@ def engine_model_from_dict(
         raise ValueError(f"{source}: not an engine model: {exc}") from None
     except (TypeError, OverflowError) as exc:  # a value of a type no check above foresaw
         raise ValueError(f"{source}: not an engine model ({type(exc).__name__}: {exc})") from None
-    outside = np.flatnonzero(~((model.lam > 0.0) & (model.lam < 2.0)))
+    outside = model.gains_outside_range()
     if outside.size:  # u* = u + (lambda - 1)|u|: lambda u above the operating point, (2 - lambda) u below
         raise ValueError(
             f"{source}: lambda must lie in (0, 2), got {describe(model.lam.tolist())}: outside it the "
